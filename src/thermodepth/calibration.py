@@ -1,0 +1,206 @@
+"""The calibration file: both cameras' intrinsics and the depth -> thermal rigid transform.
+
+YAML or JSON (chosen by the file extension), validated on load::
+
+    depth:   {width, height, fx, fy, cx, cy, distortion: [k1, k2, p1, p2, k3], depth_scale_m}
+    thermal: {width, height, fx, fy, cx, cy, distortion: [k1, k2, p1, p2, k3]}
+    thermal_from_depth: {rotation: [[r00, r01, r02], [r10, r11, r12], [r20, r21, r22]],
+                         translation_m: [tx, ty, tz]}
+
+Pixels follow OpenCV conventions (pixel centres at integers); ``depth_scale_m`` converts the
+depth camera's integer units to metres (0.001 for a D435). ``thermal_from_depth`` maps a point
+in the depth camera's frame to the thermal camera's frame: p_t = R p_d + t.
+
+A bad file raises :class:`~thermodepth.errors.InputError` with one line naming the file and
+the field, e.g. ``calib.yaml: thermal.fx: must be > 0 (got -150.0)``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from .camera import Intrinsics, RigidTransform, is_rotation
+from .errors import InputError
+
+SCHEMA_VERSION = 1
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class CameraSchema(_Strict):
+    width: int = Field(gt=0)
+    height: int = Field(gt=0)
+    fx: Finite = Field(gt=0)
+    fy: Finite = Field(gt=0)
+    cx: Finite
+    cy: Finite
+    distortion: list[Finite] = Field(min_length=5, max_length=5)
+
+    @model_validator(mode="after")
+    def _principal_point_inside(self) -> CameraSchema:
+        # Pixel centres at integers: the image spans [-0.5, size - 0.5].
+        if not -0.5 <= self.cx <= self.width - 0.5:
+            raise ValueError(f"cx={self.cx} is outside the image (width {self.width})")
+        if not -0.5 <= self.cy <= self.height - 0.5:
+            raise ValueError(f"cy={self.cy} is outside the image (height {self.height})")
+        return self
+
+
+class DepthCameraSchema(CameraSchema):
+    depth_scale_m: Finite = Field(gt=0)
+
+
+class TransformSchema(_Strict):
+    rotation: list[list[Finite]] = Field(min_length=3, max_length=3)
+    translation_m: list[Finite] = Field(min_length=3, max_length=3)
+
+    @model_validator(mode="after")
+    def _orthonormal(self) -> TransformSchema:
+        if any(len(row) != 3 for row in self.rotation):
+            raise ValueError("rotation must be 3 rows of 3 numbers")
+        if not is_rotation(self.rotation, tol=1e-6):
+            r = np.asarray(self.rotation)
+            err = float(np.max(np.abs(r.T @ r - np.eye(3))))
+            raise ValueError(
+                f"rotation is not orthonormal with det +1 (max |R^T R - I| = {err:.2e}, "
+                f"det = {np.linalg.det(r):.6f}; tolerance 1e-6)"
+            )
+        return self
+
+
+class CalibrationSchema(_Strict):
+    depth: DepthCameraSchema
+    thermal: CameraSchema
+    thermal_from_depth: TransformSchema
+    schema_version: int = SCHEMA_VERSION
+
+
+def _intrinsics(cam: CameraSchema) -> Intrinsics:
+    return Intrinsics(
+        cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, np.asarray(cam.distortion)
+    )
+
+
+def _camera_dict(intr: Intrinsics) -> dict[str, Any]:
+    return {
+        "width": intr.width,
+        "height": intr.height,
+        "fx": float(intr.fx),
+        "fy": float(intr.fy),
+        "cx": float(intr.cx),
+        "cy": float(intr.cy),
+        "distortion": [float(k) for k in intr.distortion],
+    }
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """Depth and thermal intrinsics, the depth unit, and ``thermal_from_depth``."""
+
+    depth: Intrinsics
+    thermal: Intrinsics
+    depth_scale_m: float
+    thermal_from_depth: RigidTransform
+
+    def __post_init__(self) -> None:
+        t = self.thermal_from_depth
+        if (t.to_frame, t.from_frame) != ("thermal", "depth"):
+            raise ValueError(f"expected a thermal_from_depth transform, got {t.name}")
+
+    @classmethod
+    def from_dict(cls, data: Any, source: str = "<calibration>") -> Calibration:
+        """Validate a mapping against the schema; errors name ``source`` and the field."""
+        try:
+            s = CalibrationSchema.model_validate(data)
+        except ValidationError as exc:
+            raise InputError(f"{source}: {describe_validation_error(exc)}") from None
+        return cls(
+            depth=_intrinsics(s.depth),
+            thermal=_intrinsics(s.thermal),
+            depth_scale_m=s.depth.depth_scale_m,
+            thermal_from_depth=RigidTransform(
+                np.array(s.thermal_from_depth.rotation),
+                np.array(s.thermal_from_depth.translation_m),
+                "thermal",
+                "depth",
+            ),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "schema_version": SCHEMA_VERSION,
+            "depth": {**_camera_dict(self.depth), "depth_scale_m": float(self.depth_scale_m)},
+            "thermal": _camera_dict(self.thermal),
+            "thermal_from_depth": {
+                "rotation": self.thermal_from_depth.rotation.tolist(),
+                "translation_m": self.thermal_from_depth.translation_m.tolist(),
+            },
+        }
+
+    @classmethod
+    def load(cls, path: str | Path) -> Calibration:
+        """Read and validate a YAML (.yaml/.yml) or JSON (.json) calibration file."""
+        return cls.from_dict(read_mapping(path), source=str(path))
+
+    def save(self, path: str | Path) -> None:
+        """Write YAML or JSON by extension, floats at full precision (round-trips exactly)."""
+        write_mapping(path, self.to_dict())
+
+    @property
+    def baseline_m(self) -> float:
+        """Distance between the two optical centres, metres."""
+        return float(np.linalg.norm(self.thermal_from_depth.translation_m))
+
+
+def describe_validation_error(exc: ValidationError) -> str:
+    """One line for the first error of a pydantic validation: ``field.path: message``."""
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"])
+    if err["type"] == "missing":
+        msg = "missing"
+    elif err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    else:
+        msg = err["msg"].removeprefix("Value error, ")
+        if "input" in err and err["type"] not in ("model_type",):
+            msg += f" (got {err['input']!r})"
+    more = len(exc.errors()) - 1
+    suffix = f" [and {more} more problem{'s' if more > 1 else ''}]" if more else ""
+    return f"{loc}: {msg}{suffix}" if loc else f"{msg}{suffix}"
+
+
+def read_mapping(path: str | Path) -> Any:
+    """Parse a YAML or JSON file; unreadable or malformed files raise a one-line InputError."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    try:
+        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as exc:
+        first = str(exc).strip().splitlines()[0]
+        raise InputError(f"{p}: not valid {p.suffix.lstrip('.') or 'YAML'}: {first}") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{p}: expected a mapping of keys at the top level")
+    return data
+
+
+def write_mapping(path: str | Path, data: dict[str, Any]) -> None:
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    if p.suffix.lower() == ".json":
+        p.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    else:
+        p.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")

@@ -1,0 +1,160 @@
+"""The calibration file: round trips and one-line errors that name the file and field."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from thermodepth.calibration import Calibration
+from thermodepth.camera import rotation_from_euler
+from thermodepth.errors import InputError
+
+EXAMPLE = Path(__file__).parents[1] / "examples" / "calibration.yaml"
+
+
+def valid_dict() -> dict[str, Any]:
+    return {
+        "depth": {
+            "width": 1280,
+            "height": 720,
+            "fx": 645.0,
+            "fy": 645.0,
+            "cx": 639.5,
+            "cy": 359.5,
+            "distortion": [0, 0, 0, 0, 0],
+            "depth_scale_m": 0.001,
+        },
+        "thermal": {
+            "width": 160,
+            "height": 120,
+            "fx": 150.5,
+            "fy": 150.5,
+            "cx": 79.5,
+            "cy": 59.5,
+            "distortion": [-0.12, 0.05, 0, 0, 0],
+        },
+        "thermal_from_depth": {
+            "rotation": rotation_from_euler(0.01, -0.02, 0.015).tolist(),
+            "translation_m": [-0.04, 0.001, 0.002],
+        },
+    }
+
+
+@pytest.mark.parametrize("suffix", [".yaml", ".json"])
+def test_round_trip_is_exact(tmp_path: Path, suffix: str) -> None:
+    cal = Calibration.from_dict(valid_dict())
+    path = tmp_path / f"calib{suffix}"
+    cal.save(path)
+    back = Calibration.load(path)
+    np.testing.assert_array_equal(back.thermal_from_depth.rotation, cal.thermal_from_depth.rotation)
+    np.testing.assert_array_equal(back.thermal.distortion, cal.thermal.distortion)
+    assert back.to_dict() == cal.to_dict()
+    assert back.baseline_m == pytest.approx(np.linalg.norm([-0.04, 0.001, 0.002]))
+
+
+def test_example_file_is_valid() -> None:
+    cal = Calibration.load(EXAMPLE)
+    assert cal.depth.shape == (720, 1280) and cal.thermal.shape == (120, 160)
+    assert cal.thermal_from_depth.name == "thermal_from_depth"
+
+
+def _set(d: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
+    out = copy.deepcopy(d)
+    *keys, last = path.split(".")
+    node = out
+    for k in keys:
+        node = node[k]
+    if value is _DELETE:
+        del node[last]
+    else:
+        node[last] = value
+    return out
+
+
+_DELETE = object()
+
+BAD_CASES = [
+    ("thermal.fx", _DELETE, "thermal.fx: missing"),
+    ("depth.depth_scale_m", _DELETE, "depth.depth_scale_m: missing"),
+    ("thermal_from_depth", _DELETE, "thermal_from_depth: missing"),
+    ("thermal.distortion", [0.1, 0.0, 0.0, 0.0], "thermal.distortion: List should have at least 5"),
+    ("depth.distortion", [0, 0, 0, 0, 0, 0], "depth.distortion: List should have at most 5"),
+    (
+        "thermal_from_depth.rotation",
+        [[1, 0, 0], [0, 1, 0.001], [0, 0, 1]],
+        "thermal_from_depth: rotation is not orthonormal",
+    ),
+    (
+        "thermal_from_depth.rotation",
+        [[1, 0, 0], [0, 1, 0], [0, 0, -1]],
+        "thermal_from_depth: rotation is not orthonormal",
+    ),
+    ("thermal.fx", -150.0, "thermal.fx: Input should be greater than 0"),
+    ("depth.fy", 0, "depth.fy: Input should be greater than 0"),
+    ("thermal.cx", float("nan"), "thermal.cx: Input should be a finite number"),
+    (
+        "thermal_from_depth.translation_m",
+        [0.0, float("inf"), 0.0],
+        "thermal_from_depth.translation_m.1: Input should be a finite number",
+    ),
+    ("thermal.cx", 170.0, "thermal: cx=170.0 is outside the image (width 160)"),
+    ("depth.cy", -3.0, "depth: cy=-3.0 is outside the image (height 720)"),
+    ("thermal.fxx", 1.0, "thermal.fxx: unknown key"),
+    ("depth.width", "wide", "depth.width: Input should be a valid integer"),
+]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    BAD_CASES,
+    ids=[f"{c[0]}={'del' if c[1] is _DELETE else c[1]}" for c in BAD_CASES],
+)
+@pytest.mark.parametrize("suffix", [".yaml", ".json"])
+def test_bad_file_names_file_and_field(
+    tmp_path: Path, suffix: str, field: str, value: Any, message: str
+) -> None:
+    path = tmp_path / f"calib{suffix}"
+    data = _set(valid_dict(), field, value)
+    if suffix == ".json":
+        path.write_text(json.dumps(data))  # NaN/Infinity are written as JSON extensions
+    else:
+        path.write_text(yaml.safe_dump(data))
+    with pytest.raises(InputError) as info:
+        Calibration.load(path)
+    text = str(info.value)
+    assert text.startswith(f"{path}: {message}")
+    assert "\n" not in text
+
+
+def test_rotation_within_tolerance_is_accepted() -> None:
+    d = valid_dict()
+    d["thermal_from_depth"]["rotation"][0][0] += 4e-7  # inside the 1e-6 tolerance
+    Calibration.from_dict(d)
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "message"),
+    [
+        ("empty.yaml", "", "expected a mapping"),
+        ("list.yaml", "- 1\n- 2\n", "expected a mapping"),
+        ("broken.yaml", "depth: {width: 1280\n", "not valid yaml"),
+        ("broken.json", '{"depth": ', "not valid json"),
+    ],
+)
+def test_malformed_files(tmp_path: Path, name: str, content: str, message: str) -> None:
+    path = tmp_path / name
+    path.write_text(content)
+    with pytest.raises(InputError, match=message) as info:
+        Calibration.load(path)
+    assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="cannot read"):
+        Calibration.load(tmp_path / "nope.yaml")

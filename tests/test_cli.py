@@ -1,0 +1,77 @@
+"""The command line: version, one-line errors, thin commands over plain functions."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from thermodepth import __version__
+from thermodepth.cli import app, counts_to_celsius
+from thermodepth.errors import InputError
+
+EXAMPLE = Path(__file__).parents[1] / "examples" / "calibration.yaml"
+runner = CliRunner()
+
+
+def test_version() -> None:
+    result = runner.invoke(app, ["--version"])
+    assert result.exit_code == 0
+    assert __version__ in result.output
+
+
+def test_check_calibration_json_summary() -> None:
+    result = runner.invoke(app, ["check-calibration", str(EXAMPLE), "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    assert summary["baseline_mm"] == pytest.approx(40.0)
+    assert summary["thermal"] == "160x120"
+    assert summary["thermal_hfov_deg"] == pytest.approx(55.99, abs=0.01)
+
+
+def test_bad_calibration_is_one_line_without_traceback(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(EXAMPLE.read_text().replace("fx: 150.5", "fx: -150.5"))
+    # a real process, so that the console script's own error path is what is checked
+    proc = subprocess.run(
+        [sys.executable, "-m", "thermodepth.cli", "check-calibration", str(bad)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert f"{bad}: thermal.fx: Input should be greater than 0" in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_temperature_command() -> None:
+    result = runner.invoke(app, ["temperature", "8502.1", "--emissivity", "1", "--distance-m", "0"])
+    assert result.exit_code == 0, result.output
+    assert "39.000 C" in result.output
+
+
+def test_counts_to_celsius_applies_emissivity_and_distance() -> None:
+    bare = counts_to_celsius([8502.1])[0]
+    corrected = counts_to_celsius([8502.1], emissivity=0.95, distance_m=2.0)[0]
+    assert bare == pytest.approx(39.0, abs=1e-3)
+    assert corrected > bare + 0.5  # a grey body far away is hotter than its counts suggest
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"preset": "nope"}, "--preset"),
+        ({"method": "nope"}, "--method"),
+        ({"humidity_pct": 500.0}, "relative_humidity"),
+    ],
+)
+def test_counts_to_celsius_bad_options(kwargs: dict[str, object], message: str) -> None:
+    with pytest.raises(InputError, match=message):
+        counts_to_celsius([8500.0], **kwargs)  # type: ignore[arg-type]
