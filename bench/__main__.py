@@ -1,14 +1,17 @@
-"""Run every benchmark and print its table (`make bench`)."""
+"""Run every benchmark and print its table (`make bench`); JSON copies go to bench-out/."""
 
 from __future__ import annotations
 
-BENCHMARKS: list[str] = []
+import importlib
+import sys
+
+BENCHMARKS = ["bench_sim"]
 
 
-def main() -> None:
-    if not BENCHMARKS:
-        print("no benchmarks yet")
+def main(names: list[str]) -> None:
+    for name in names or BENCHMARKS:
+        importlib.import_module(f"bench.{name}").main()
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

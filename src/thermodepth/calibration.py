@@ -18,12 +18,14 @@ the field, e.g. ``calib.yaml: thermal.fx: must be > 0 (got -150.0)``.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .camera import Intrinsics, RigidTransform, is_rotation
@@ -204,3 +206,51 @@ def write_mapping(path: str | Path, data: dict[str, Any]) -> None:
         p.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
     else:
         p.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A calibration target in OpenCV's terms.
+
+    checkerboard: ``cols`` x ``rows`` inner corners, squares of ``spacing_m``;
+    circles: an asymmetric grid of ``cols`` circles per row and ``rows`` rows, circle ``j`` of
+    row ``i`` at ((2 j + i % 2) s, i s) with s = ``spacing_m`` (OpenCV's squareSize).
+    """
+
+    kind: Literal["checkerboard", "circles"]
+    cols: int
+    rows: int
+    spacing_m: float
+
+    @classmethod
+    def parse(cls, text: str, spacing_m: float) -> BoardSpec:
+        """Parse ``checkerboard:9x6`` or ``circles:4x11``; bad text raises InputError."""
+        m = re.fullmatch(r"(checkerboard|circles):(\d+)x(\d+)", text.strip())
+        if not m:
+            raise InputError(
+                f"--board: expected checkerboard:COLSxROWS or circles:COLSxROWS, got {text!r}"
+            )
+        kind, cols, rows = m.group(1), int(m.group(2)), int(m.group(3))
+        if cols < 2 or rows < 2:
+            raise InputError(f"--board: need at least 2x2, got {cols}x{rows}")
+        if not spacing_m > 0:
+            raise InputError(f"--square-m: must be > 0, got {spacing_m}")
+        return cls(kind, cols, rows, spacing_m)  # type: ignore[arg-type]
+
+    @property
+    def pattern_size(self) -> tuple[int, int]:
+        return (self.cols, self.rows)
+
+    def object_points_m(self) -> NDArray[np.float64]:
+        """Target points (N, 3) in the board frame, in OpenCV's detection order."""
+        i, j = np.meshgrid(np.arange(self.rows), np.arange(self.cols), indexing="ij")
+        s = self.spacing_m
+        if self.kind == "checkerboard":
+            x, y = j * s, i * s
+        else:
+            x, y = (2 * j + i % 2) * s, i * s
+        pts = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=-1).astype(np.float64)
+        return pts - (pts.max(axis=0) + pts.min(axis=0)) / 2  # centred on the board
+
+    def __str__(self) -> str:
+        return f"{self.kind}:{self.cols}x{self.rows}"

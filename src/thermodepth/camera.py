@@ -208,6 +208,23 @@ class Intrinsics:
         if self.width <= 0 or self.height <= 0:
             raise ValueError(f"image size must be positive, got {self.width}x{self.height}")
 
+    def _key(self) -> tuple[float, ...]:
+        return (
+            self.width,
+            self.height,
+            self.fx,
+            self.fy,
+            self.cx,
+            self.cy,
+            *self.distortion.tolist(),
+        )
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Intrinsics) and self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
     @property
     def matrix(self) -> FloatArray:
         """The 3x3 camera matrix K."""

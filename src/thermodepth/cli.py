@@ -4,17 +4,26 @@ from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import numpy as np
 import typer
 from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    SpinnerColumn,
+    TextColumn,
+    TimeElapsedColumn,
+)
 from rich.table import Table
 
 from . import __version__
-from .errors import ThermodepthError
+from .errors import InputError, ThermodepthError
 
 app = typer.Typer(
     name="thermodepth",
@@ -130,7 +139,6 @@ def counts_to_celsius(
     method: str = "flir",
 ) -> list[float]:
     """Object temperatures (C) of raw counts, parameters given at the edge in C and %."""
-    from .errors import InputError
     from .radiometry import (
         PLANCK_PRESETS,
         RADIOMETRY_METHODS,
@@ -158,6 +166,138 @@ def counts_to_celsius(
         raise InputError(str(exc)) from None
     params = RadiometryParams(planck=PLANCK_PRESETS[preset], obj=obj)
     return [float(t) for t in raw_to_celsius(np.asarray(counts), params, method)]
+
+
+# -- simulate -------------------------------------------------------------------------------
+
+simulate_app = typer.Typer(
+    help="Simulate the D435 + Lepton 3 rig (sweeps, frames, targets).", no_args_is_help=True
+)
+app.add_typer(simulate_app, name="simulate")
+
+
+def parse_floats(text: str, option: str) -> list[float]:
+    """Comma-separated numbers of an option (``0.5,1,1.5``); InputError names the option."""
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"{option}: expected comma-separated numbers, got {text!r}") from None
+    if not values:
+        raise InputError(f"{option}: expected at least one number")
+    return values
+
+
+@contextmanager
+def progress_bar(description: str, total: int) -> Iterator[Callable[[int], None]]:
+    """A rich progress bar; yields ``advance(n)``."""
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=False,
+    ) as bar:
+        task = bar.add_task(description, total=total)
+        yield lambda n: bar.advance(task, n)
+
+
+@simulate_app.command("sweep")
+@one_line_errors
+def simulate_sweep_cmd(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Sweep CSV to write.")],
+    distances: Annotated[
+        str, typer.Option(help="Distances, m (comma-separated).")
+    ] = "0.5,1.0,1.5,2.0,2.5",
+    plate_temps: Annotated[str, typer.Option(help="Plate temperatures, C.")] = "39",
+    samples: Annotated[
+        int, typer.Option(help="Readings per distance and plate temperature.")
+    ] = 6000,
+    vox_min: Annotated[float, typer.Option(help="Lowest VOx (FPA) temperature, C.")] = 25.0,
+    vox_max: Annotated[float, typer.Option(help="Highest VOx (FPA) temperature, C.")] = 40.0,
+    ambient_c: Annotated[float, typer.Option(help="Ambient temperature, C.")] = 25.0,
+    humidity_pct: Annotated[float, typer.Option(help="Relative humidity, %.")] = 50.0,
+    by_vox: Annotated[
+        bool, typer.Option("--by-vox", help="Average per 1 C of VOx (Tables 1-5).")
+    ] = False,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+) -> None:
+    """The paper's protocol: plate-centre ROI readings vs distance and VOx temperature."""
+    from .sim.protocols import SweepConfig
+    from .sweep import write_sweep_csv
+
+    config = SweepConfig(
+        tuple(parse_floats(distances, "--distances")),
+        tuple(parse_floats(plate_temps, "--plate-temps")),
+        vox_min,
+        vox_max,
+        samples,
+        ambient_c,
+        humidity_pct,
+        seed=seed,
+    )
+    table = run_sweep(config, by_vox)
+    write_sweep_csv(out, table)
+    console.print(f"wrote {len(table)} rows to {out}")
+
+
+def run_sweep(config: Any, by_vox: bool = False) -> Any:
+    """Simulate a sweep with a progress bar; validate the config first (InputError)."""
+    from .sim.protocols import aggregate_by_vox, simulate_sweep
+
+    if config.samples < 1:
+        raise InputError("--samples: must be at least 1")
+    if not config.vox_min_c < config.vox_max_c:
+        raise InputError("--vox-min must be below --vox-max")
+    if min(config.distances_m) <= 0:
+        raise InputError("--distances: must be positive")
+    total = len(config.distances_m) * len(config.plate_temps_c)
+    with progress_bar("sweep", total) as advance:
+        table = simulate_sweep(config, progress=advance)
+    return aggregate_by_vox(table) if by_vox else table
+
+
+@simulate_app.command("frames")
+@one_line_errors
+def simulate_frames_cmd(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Directory to write.")],
+    scene: Annotated[
+        str, typer.Option(help="plate or inspection (plate + 70 C chip).")
+    ] = "inspection",
+    distance_m: Annotated[float, typer.Option(help="Rig distance to the plate, m.")] = 1.0,
+    frames: Annotated[int, typer.Option(help="Number of frame pairs.")] = 5,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+) -> None:
+    """Frame pairs with ground truth (npz per frame) and the rig's calibration."""
+    from .sim.protocols import SCENES, write_frames
+
+    if scene not in SCENES:
+        raise InputError(f"--scene: unknown {scene!r}; choose from {sorted(SCENES)}")
+    with progress_bar("frames", frames) as advance:
+        paths = write_frames(out, SCENES[scene](), distance_m, frames, seed, advance)
+    console.print(f"wrote {len(paths)} frames and calibration.yaml to {out}")
+
+
+@simulate_app.command("targets")
+@one_line_errors
+def simulate_targets_cmd(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Directory to write.")],
+    board: Annotated[
+        str, typer.Option(help="checkerboard:COLSxROWS (inner corners) or circles:COLSxROWS.")
+    ] = "checkerboard:9x6",
+    square_m: Annotated[float, typer.Option(help="Square size (circle grid step), m.")] = 0.03,
+    poses: Annotated[int, typer.Option(help="Number of board poses.")] = 20,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+) -> None:
+    """Heated-board captures (IR + thermal per pose) for `thermodepth calibrate`."""
+    from .calibration import BoardSpec
+    from .sim.protocols import simulate_targets
+
+    spec = BoardSpec.parse(board, square_m)
+    with progress_bar("targets", poses) as advance:
+        caps = simulate_targets(out, spec, poses, seed, progress=advance)
+    console.print(f"wrote {len(caps.pairs)} pairs and {caps.calibration_path.name} to {out}")
 
 
 def main() -> None:

@@ -1,0 +1,77 @@
+"""The frame type every source yields: a depth frame and a thermal frame paired in time.
+
+The simulated rig, real cameras and recordings all produce :class:`FramePair`, so nothing
+downstream knows where frames came from. Arrays are kept as the devices give them: depth in
+the depth camera's integer units (0 = invalid), thermal in raw 14-bit counts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+class FfcState(IntEnum):
+    """Flat-field correction (shutter) state, as the Lepton telemetry encodes it (IDD)."""
+
+    NEVER_COMMANDED = 0
+    IMMINENT = 1
+    IN_PROGRESS = 2
+    COMPLETE = 3
+
+
+@dataclass(frozen=True)
+class Telemetry:
+    """Per-frame thermal camera telemetry (Lepton telemetry row A, SI units).
+
+    frame_counter: the camera's frame count; fpa_temp_k: focal-plane (VOx) temperature, the
+    paper's "VOx temperature"; housing_temp_k: camera housing temperature; ffc_state: shutter
+    state; time_since_ffc_s: time since the last FFC (None if unknown); ffc_desired: the camera
+    asks for an FFC; tlinear / tlinear_resolution_k: TLinear output on (Lepton 3.5) and its
+    resolution (0.01 or 0.1 K).
+    """
+
+    frame_counter: int
+    fpa_temp_k: float
+    housing_temp_k: float
+    ffc_state: FfcState = FfcState.COMPLETE
+    time_since_ffc_s: float | None = None
+    ffc_desired: bool = False
+    tlinear: bool = False
+    tlinear_resolution_k: float | None = None
+
+    @property
+    def fpa_temp_c(self) -> float:
+        return self.fpa_temp_k - 273.15
+
+    @property
+    def in_ffc(self) -> bool:
+        """True while the shutter is closed: the frame shows the shutter, not the scene."""
+        return self.ffc_state == FfcState.IN_PROGRESS
+
+
+@dataclass(frozen=True, eq=False)
+class FramePair:
+    """A depth frame and a thermal frame paired in time, with the thermal telemetry.
+
+    depth: (H, W) uint16 depth-camera units (multiply by the calibration's depth_scale_m;
+    0 = invalid); thermal: (h, w) uint16 raw counts; depth_time_s / thermal_time_s: capture
+    times in seconds on one clock; index: the pair's sequence number in its stream;
+    ir: optional (H, W) uint8 infrared image of the depth camera.
+    """
+
+    depth: NDArray[np.uint16]
+    thermal: NDArray[np.uint16]
+    depth_time_s: float
+    thermal_time_s: float
+    telemetry: Telemetry
+    index: int = 0
+    ir: NDArray[np.uint8] | None = None
+
+    @property
+    def skew_s(self) -> float:
+        """depth_time_s - thermal_time_s."""
+        return self.depth_time_s - self.thermal_time_s

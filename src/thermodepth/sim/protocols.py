@@ -1,0 +1,330 @@
+"""Measurement protocols on the simulated rig: the paper's sweep, calibration-target captures
+and frame sets with ground truth, each written where users' tools expect them."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from ..calibration import BoardSpec, Calibration
+from ..camera import RigidTransform, rotation_from_euler
+from ..radiometry import ZERO_C_IN_K, ObjectParams, RadiometryParams, raw_to_celsius
+from ..sweep import SweepTable
+from .lepton import LeptonModel, LeptonSensor, ramp_fpa
+from .rig import Rig, default_calibration
+from .scene import Scene, board_pattern, camera_pose, plate_scene, target_scene
+
+Progress = Callable[[int], None]
+"""Called with the number of units of work just done (for progress bars)."""
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """The paper's protocol (section 4): a plate at known temperatures, read at several
+    distances while the sensor's VOx temperature moves across a range.
+
+    distances_m, plate_temps_c: the grid; vox_min_c / vox_max_c: FPA range, swept by a
+    linear ramp over the samples (as a camera warming up); samples: readings per distance and
+    plate temperature (the paper takes 6000); roi_half_px: ROI of (2 h + 1)^2 thermal pixels
+    at the plate centre; emissivity: used by the radiometry of measured_temp_c.
+    """
+
+    distances_m: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5)
+    plate_temps_c: tuple[float, ...] = (39.0,)
+    vox_min_c: float = 25.0
+    vox_max_c: float = 40.0
+    samples: int = 6000
+    ambient_temp_c: float = 25.0
+    humidity_pct: float = 50.0
+    emissivity: float = 0.95
+    roi_half_px: int = 2
+    seed: int = 0
+
+
+def plate_roi(rig: Rig, half: int) -> tuple[slice, slice]:
+    """Thermal-pixel slices of a (2 half + 1)^2 ROI centred where the plate centre projects."""
+    centre = rig.thermal_from_world.apply(rig.scene.rects[rig.scene.index("plate")].center_m)
+    u, v = np.rint(rig.calibration.thermal.project(centre)).astype(int)
+    return slice(v - half, v + half + 1), slice(u - half, u + half + 1)
+
+
+def simulate_sweep(
+    config: SweepConfig | None = None,
+    lepton: LeptonModel | None = None,
+    progress: Progress | None = None,
+) -> SweepTable:
+    """Readings of the plate-centre ROI (one row per frame; FFC frames left out).
+
+    For each plate temperature and distance the noise-free aperture radiance is rendered once;
+    each of ``samples`` frames then goes through the sensor (VOx effect, FPN, FFC, NETD,
+    14-bit counts) on the ROI pixels, and the ROI mean reading is the radiometry of the
+    counts with the plate's emissivity, without distance correction.
+    """
+    config = config or SweepConfig()
+    lepton = lepton or LeptonModel()
+    k = ZERO_C_IN_K
+    ambient_k = config.ambient_temp_c + k
+    rh = config.humidity_pct / 100.0
+    params = RadiometryParams(
+        planck=lepton.planck,
+        obj=ObjectParams(
+            emissivity=config.emissivity,
+            distance_m=0.0,
+            reflected_temp_k=ambient_k,
+            atmosphere_temp_k=ambient_k,
+            relative_humidity=rh,
+        ),
+    )
+    duration_s = config.samples / lepton.fps
+    rows: dict[str, list[float]] = {
+        c: []
+        for c in (
+            "distance_m",
+            "vox_temp_c",
+            "measured_temp_c",
+            "reference_temp_c",
+            "ambient_temp_c",
+            "humidity_pct",
+            "emissivity",
+            "raw_counts",
+            "n",
+        )
+    }
+    rng = np.random.default_rng(config.seed)
+    for plate_c in config.plate_temps_c:
+        scene = plate_scene(
+            plate_temp_c=plate_c, ambient_temp_c=config.ambient_temp_c, relative_humidity=rh
+        )
+        for d in config.distances_m:
+            rig = Rig(scene, camera_pose(d), lepton=lepton)
+            roi = rig.aperture[plate_roi(rig, config.roi_half_px)]
+            fpa = ramp_fpa(config.vox_min_c + k, config.vox_max_c + k, duration_s)
+            sensor = LeptonSensor(lepton, roi.shape, fpa, rng)
+            for i in range(config.samples):
+                counts, tel = sensor.read(i / lepton.fps, roi)
+                if tel.in_ffc:
+                    continue
+                temp = raw_to_celsius(counts, params)
+                for name, value in (
+                    ("distance_m", d),
+                    ("vox_temp_c", tel.fpa_temp_c),
+                    ("measured_temp_c", float(np.mean(temp))),
+                    ("reference_temp_c", plate_c),
+                    ("ambient_temp_c", config.ambient_temp_c),
+                    ("humidity_pct", config.humidity_pct),
+                    ("emissivity", config.emissivity),
+                    ("raw_counts", float(np.mean(counts))),
+                    ("n", 1.0),
+                ):
+                    rows[name].append(value)
+            if progress:
+                progress(1)
+    return SweepTable({name: np.array(v) for name, v in rows.items()}, source="simulated sweep")
+
+
+def aggregate_by_vox(table: SweepTable, step_c: float = 1.0) -> SweepTable:
+    """Average rows per (distance, reference, VOx bin of ``step_c``), as the paper's Tables
+    1-5 do; rows are weighted by ``n`` and the result's ``n`` counts the readings in each row.
+    vox_temp_c becomes the bin centre."""
+    vox_bin = np.round(table["vox_temp_c"] / step_c) * step_c
+    keys = np.stack([table["distance_m"], table["reference_temp_c"], vox_bin], axis=1)
+    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    weights = table.get("n", 1.0)
+    total = np.bincount(inverse, weights=weights, minlength=len(uniq))
+    out = {
+        name: np.bincount(inverse, weights=col * weights, minlength=len(uniq)) / total
+        for name, col in table.columns.items()
+    }
+    out["vox_temp_c"] = uniq[:, 2]
+    out["n"] = total.astype(np.float64)
+    return SweepTable(out, source=table.source)
+
+
+# -- calibration-target captures ----------------------------------------------------------
+
+
+def random_board_poses(
+    board: BoardSpec,
+    n: int,
+    calibration: Calibration,
+    rng: np.random.Generator,
+    distance_m: tuple[float, float] = (0.55, 0.9),
+    tilt_deg: float = 28.0,
+    margin_px: float = 4.0,
+) -> list[RigidTransform]:
+    """``n`` poses ``depth_from_board`` of a board seen whole by both cameras.
+
+    Distance, tilt (about x and y, up to ``tilt_deg``), roll (10 deg) and position are drawn
+    at random; a pose is kept when the whole board (with its margin) projects inside both
+    images by ``margin_px``.
+    """
+    pattern = board_pattern(board)
+    w, h = pattern.size_m
+    corners = (
+        np.array([[-w / 2, -h / 2, 0], [w / 2, -h / 2, 0], [w / 2, h / 2, 0], [-w / 2, h / 2, 0]])
+        * 1.15
+    )
+    poses: list[RigidTransform] = []
+    tries = 0
+    while len(poses) < n:
+        tries += 1
+        if tries > 5000 * max(n, 1):
+            raise RuntimeError("could not place the board in both views; is it too large?")
+        d = rng.uniform(*distance_m)
+        rot = rotation_from_euler(
+            *np.radians(
+                [
+                    rng.uniform(-10, 10),
+                    rng.uniform(-tilt_deg, tilt_deg),
+                    rng.uniform(-tilt_deg, tilt_deg),
+                ]
+            )
+        ).T
+        # aim the board's centre near the thermal camera's view
+        centre = np.array([rng.uniform(-0.2, 0.2) * d + 0.04, rng.uniform(-0.15, 0.15) * d, d])
+        pose = RigidTransform(rot, centre, "depth", "board")
+        pts_d = pose.apply(corners)
+        ok = True
+        for intr, pts in (
+            (calibration.depth, pts_d),
+            (calibration.thermal, calibration.thermal_from_depth.apply(pts_d)),
+        ):
+            px = intr.project(pts)
+            inside = (
+                (px[:, 0] >= margin_px)
+                & (px[:, 0] <= intr.width - 1 - margin_px)
+                & (px[:, 1] >= margin_px)
+                & (px[:, 1] <= intr.height - 1 - margin_px)
+            )
+            ok &= bool(np.all(inside))
+        if ok:
+            poses.append(pose)
+    return poses
+
+
+@dataclass(frozen=True)
+class TargetCaptures:
+    """What :func:`simulate_targets` wrote: image pairs, the true calibration and poses."""
+
+    pairs: list[tuple[Path, Path]]
+    calibration_path: Path
+    poses: list[RigidTransform]
+
+
+def simulate_targets(
+    out_dir: str | Path,
+    board: BoardSpec,
+    n_poses: int = 20,
+    seed: int = 0,
+    board_temp_c: float = 45.0,
+    ambient_temp_c: float = 25.0,
+    thermal_supersample: int = 8,
+    progress: Progress | None = None,
+) -> TargetCaptures:
+    """Heated-board captures for ``thermodepth calibrate``: ``poseNN_ir.png`` (8-bit IR of
+    the depth camera) and ``poseNN_thermal.png`` (16-bit counts) per pose, plus
+    ``truth_calibration.yaml`` and ``truth_poses.json`` (``depth_from_board``)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cal = default_calibration()
+    rng = np.random.default_rng(seed)
+    poses = random_board_poses(board, n_poses, cal, rng)
+    lepton = LeptonModel(supersample=thermal_supersample)
+    identity = RigidTransform.identity("world", "depth")
+    pairs = []
+    for i, pose in enumerate(poses):
+        world_from_board = RigidTransform(pose.rotation, pose.translation_m, "world", "board")
+        scene = target_scene(
+            board_pattern(board), board_temp_c, ambient_temp_c, board_pose=world_from_board
+        )
+        rig = Rig(
+            scene,
+            identity,
+            calibration=cal,
+            lepton=lepton,
+            with_ir=True,
+            seed=seed * 1000 + i,
+            start_s=1.0,
+        )  # after the start-up FFC
+        frame = rig.frame()
+        assert frame.ir is not None
+        ir_path, th_path = out / f"pose{i:02d}_ir.png", out / f"pose{i:02d}_thermal.png"
+        cv2.imwrite(str(ir_path), frame.ir)
+        cv2.imwrite(str(th_path), frame.thermal)
+        pairs.append((ir_path, th_path))
+        if progress:
+            progress(1)
+    cal_path = out / "truth_calibration.yaml"
+    cal.save(cal_path)
+    (out / "truth_poses.json").write_text(
+        json.dumps(
+            [
+                {"rotation": p.rotation.tolist(), "translation_m": p.translation_m.tolist()}
+                for p in poses
+            ],
+            indent=1,
+        )
+    )
+    return TargetCaptures(pairs, cal_path, poses)
+
+
+# -- frame sets with ground truth ---------------------------------------------------------
+
+SCENES: dict[str, Callable[[], Scene]] = {
+    "plate": plate_scene,
+    "inspection": lambda: plate_scene(chip_temp_c=70.0),
+}
+
+
+def write_frames(
+    out_dir: str | Path,
+    scene: Scene,
+    distance_m: float,
+    n_frames: int,
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> list[Path]:
+    """Write ``n_frames`` frame pairs with ground truth: ``calibration.yaml``, then per frame
+    ``frame_NNNNNN.npz`` holding depth (uint16), thermal (uint16), times, telemetry (JSON) and
+    the truth on both grids (float32; depth_z_m, depth_temp_k, thermal_pixel_of_depth,
+    visible_in_thermal, thermal_temp_k, thermal_range_m)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rig = Rig(scene, camera_pose(distance_m), seed=seed, start_s=1.0)
+    rig.calibration.save(out / "calibration.yaml")
+    truth = rig.truth()
+    written = []
+    for frame in rig.frames(n_frames):
+        path = out / f"frame_{frame.index:06d}.npz"
+        tel = {
+            k: (v.name if hasattr(v, "name") else v) for k, v in frame.telemetry.__dict__.items()
+        }
+        np.savez_compressed(
+            path,
+            depth=frame.depth,
+            thermal=frame.thermal,
+            depth_time_s=frame.depth_time_s,
+            thermal_time_s=frame.thermal_time_s,
+            telemetry=json.dumps(tel),
+            depth_z_m=_f32(truth.depth_z_m),
+            depth_temp_k=_f32(truth.depth_temp_k),
+            thermal_pixel_of_depth=_f32(truth.thermal_pixel_of_depth),
+            visible_in_thermal=truth.visible_in_thermal,
+            thermal_temp_k=_f32(truth.thermal_temp_k),
+            thermal_range_m=_f32(truth.thermal_range_m),
+        )
+        written.append(path)
+        if progress:
+            progress(1)
+    return written
+
+
+def _f32(a: NDArray[np.float64]) -> NDArray[np.float32]:
+    return np.where(np.isfinite(a), a, np.nan).astype(np.float32)

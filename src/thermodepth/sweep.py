@@ -1,0 +1,183 @@
+"""The sweep CSV: readings of a target of known temperature at several distances and VOx
+(sensor) temperatures, the interchange between users' measurements, the simulator and the
+compensation models.
+
+Columns (one row per reading, or per averaged reading with ``n``), Celsius and percent at this
+edge as users write them:
+
+==================  ========  =================================================================
+column              required  meaning
+==================  ========  =================================================================
+distance_m          yes       distance from the camera to the target, metres
+vox_temp_c          yes       the thermal camera's FPA (VOx) temperature, C
+measured_temp_c     yes       uncompensated reading of the target (ROI mean), C: radiometry
+                              with emissivity, without distance correction
+reference_temp_c    yes*      the target's true temperature (contact sensor), C
+ambient_temp_c      no        air / surroundings temperature, C
+humidity_pct        no        relative humidity, percent
+emissivity          no        target emissivity used for measured_temp_c
+raw_counts          no        mean raw counts of the ROI
+n                   no        number of readings averaged into the row (default 1)
+==================  ========  =================================================================
+
+(*) not needed to apply a model to new readings. Other columns are kept as they are.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+REQUIRED = ("distance_m", "vox_temp_c", "measured_temp_c", "reference_temp_c")
+OPTIONAL = ("ambient_temp_c", "humidity_pct", "emissivity", "raw_counts", "n")
+COLUMNS = REQUIRED + OPTIONAL
+
+
+@dataclass(eq=False)
+class SweepTable:
+    """Numeric columns as float arrays of equal length, plus any other columns as text.
+
+    ``source`` names the file in messages; ``lines`` holds each row's line number in it.
+    """
+
+    columns: dict[str, FloatArray]
+    extra: dict[str, list[str]] = field(default_factory=dict)
+    source: str = "<sweep>"
+    lines: NDArray[np.int64] | None = None
+
+    def __len__(self) -> int:
+        return len(next(iter(self.columns.values()))) if self.columns else 0
+
+    def __getitem__(self, name: str) -> FloatArray:
+        return self.columns[name]
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.columns
+
+    def get(self, name: str, default: float) -> FloatArray:
+        """A column, or ``default`` for every row when the file lacks it."""
+        return self.columns.get(name, np.full(len(self), float(default)))
+
+    def select(self, mask: NDArray[np.bool_]) -> SweepTable:
+        """The rows where ``mask`` is True."""
+        idx = np.flatnonzero(mask)
+        return SweepTable(
+            {k: v[idx] for k, v in self.columns.items()},
+            {k: [v[i] for i in idx] for k, v in self.extra.items()},
+            self.source,
+            None if self.lines is None else self.lines[idx],
+        )
+
+    def with_columns(self, **cols: FloatArray | Sequence[str]) -> SweepTable:
+        """A copy with columns added or replaced (numeric arrays or lists of text)."""
+        num = dict(self.columns)
+        txt = dict(self.extra)
+        for k, v in cols.items():
+            if isinstance(v, np.ndarray) and v.dtype.kind in "fiub":
+                num[k] = v.astype(np.float64)
+                txt.pop(k, None)
+            else:
+                txt[k] = [str(x) for x in v]
+                num.pop(k, None)
+        return SweepTable(num, txt, self.source, self.lines)
+
+    @classmethod
+    def from_rows(cls, rows: Iterable[Mapping[str, float]], source: str = "<sweep>") -> SweepTable:
+        rows = list(rows)
+        names = list(rows[0]) if rows else list(REQUIRED)
+        return cls(
+            {k: np.array([r[k] for r in rows], dtype=np.float64) for k in names}, source=source
+        )
+
+
+def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> SweepTable:
+    """Read and validate a sweep CSV.
+
+    Raises :class:`InputError` with one line naming the file and, where it applies, the line
+    and column: an empty file, missing columns (all named), a value that is not a number.
+    Known columns must be numeric; others are kept as text.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    reader = csv.reader(text.splitlines())
+    header = next(reader, None)
+    if header is None or not any(h.strip() for h in header):
+        raise InputError(f"{p}: empty file (expected a header with {', '.join(required)})")
+    header = [h.strip() for h in header]
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise InputError(
+            f"{p}: missing column{'s' if len(missing) > 1 else ''}: "
+            f"{', '.join(missing)} (found: {', '.join(header)})"
+        )
+    numeric = [h for h in header if h in COLUMNS]
+    values: dict[str, list[float]] = {h: [] for h in numeric}
+    extra: dict[str, list[str]] = {h: [] for h in header if h not in COLUMNS}
+    lines: list[int] = []
+    for row in reader:
+        line = reader.line_num
+        if not row or not any(cell.strip() for cell in row):
+            continue  # blank line
+        if len(row) != len(header):
+            raise InputError(f"{p}: line {line}: {len(row)} fields, header has {len(header)}")
+        for name, cell in zip(header, row, strict=True):
+            if name in values:
+                values[name].append(_number(cell, p, line, name))
+            else:
+                extra[name].append(cell)
+        lines.append(line)
+    if not lines:
+        raise InputError(f"{p}: no data rows after the header")
+    return SweepTable(
+        {k: np.array(v) for k, v in values.items()}, extra, str(p), np.array(lines, dtype=np.int64)
+    )
+
+
+def _number(cell: str, path: Path, line: int, column: str) -> float:
+    try:
+        value = float(cell)
+    except ValueError:
+        raise InputError(f"{path}: line {line}, column {column}: not a number: {cell!r}") from None
+    if not math.isfinite(value):
+        raise InputError(f"{path}: line {line}, column {column}: not a finite number: {cell!r}")
+    return value
+
+
+def write_sweep_csv(path: str | Path, table: SweepTable, digits: int = 6) -> None:
+    """Write a sweep table: known columns first in their documented order, then the rest."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    known = [c for c in COLUMNS if c in table.columns]
+    rest = [c for c in table.columns if c not in COLUMNS] + list(table.extra)
+    names = known + rest
+    cols: list[Sequence[object]] = []
+    for name in names:
+        if name in table.columns:
+            arr = table.columns[name]
+            if name == "n":
+                cols.append([str(round(float(v))) for v in arr])
+            else:
+                cols.append([_fmt(v, digits) for v in arr])
+        else:
+            cols.append(table.extra[name])
+    with p.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(names)
+        w.writerows(zip(*cols, strict=True))
+
+
+def _fmt(value: float, digits: int) -> str:
+    return "" if not math.isfinite(value) else f"{value:.{digits}g}"
