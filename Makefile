@@ -20,7 +20,8 @@ venv: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/thermodepth check-calibration examples/calibration.yaml
-	$(BIN)/thermodepth temperature 8033 8502 9000 --emissivity 0.95 --distance-m 1.5
+	$(BIN)/thermodepth simulate sweep -o $(OUT)/sweep.csv --samples 600 --by-vox
+	$(BIN)/thermodepth simulate frames -o $(OUT)/frames --frames 3
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
