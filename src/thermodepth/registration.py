@@ -1,0 +1,446 @@
+"""Depth <-> thermal registration: which thermal pixel sees the surface of each depth pixel.
+
+Two directions, on one calibration (``thermal_from_depth``, both intrinsics):
+
+- :meth:`Registration.depth_to_thermal`: for every thermal pixel, the nearest surface among
+  all depth pixels that land in it (a z-buffer): Z along the thermal optical axis and the
+  Euclidean range (what the atmosphere model needs).
+- :meth:`Registration.thermal_to_depth`: for every depth pixel, the thermal value of the
+  pixel that sees it, NaN with a reason where the depth is invalid, the point falls outside
+  the thermal image, or a nearer surface hides it from the thermal camera (the z-buffer
+  test). librealsense's align has no such test, so hot objects bleed onto what is behind.
+
+Methods (``REGISTRATION_METHODS``):
+
+- ``"reproject"`` (default): every depth pixel is deprojected with its depth, moved into the
+  thermal frame and projected through the thermal lens (OpenCV distortion, refused beyond the
+  radius where the polynomial folds). Exact up to the depth noise.
+- ``"paper"``: Lin & Yao 2022, section 2.2: the thermal image is cropped/offset and upscaled
+  to the depth grid with nearest neighbour, an affine map that is right at one reference
+  distance only (parallax error elsewhere). No occlusion test.
+
+Kernels are numba, multi-threaded over rows, float32 inside; compiled once and cached on
+disk.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+from pathlib import Path
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from .calibration import Calibration
+from .camera import Intrinsics
+
+FloatArray = NDArray[np.float32]
+
+
+class Reason(IntEnum):
+    """Why a depth pixel has no thermal value (``ThermalOnDepth.reason``)."""
+
+    OK = 0
+    INVALID_DEPTH = 1
+    OUTSIDE = 2
+    OCCLUDED = 3
+
+
+class DepthOnThermal(NamedTuple):
+    """Nearest surface per thermal pixel, float32 (h, w), NaN where no depth pixel lands."""
+
+    z_m: FloatArray
+    range_m: FloatArray
+
+
+class ThermalOnDepth(NamedTuple):
+    """Thermal value per depth pixel, float32 (H, W) (NaN where none) and the reason, uint8."""
+
+    values: FloatArray
+    reason: NDArray[np.uint8]
+
+
+# ---------------------------------------------------------------------------------------------
+# kernels
+# ---------------------------------------------------------------------------------------------
+
+_JIT = {"cache": True, "fastmath": True, "error_model": "numpy"}
+
+# geo (float32): t (3), fx, fy, cx, cy, k1, k2, p1, p2, k3, r2max of the thermal camera.
+# Rays: the depth pixel (u, v) at depth z is the point P = R (z ray) + t = z (A_u + B_v) + t in
+# the thermal frame, with per-column A (a0, a1, a2) and per-row B (brow); for a depth camera
+# with distortion A holds a full (H, W) grid and B is zero.
+
+
+@numba.njit(inline="always", **_JIT)
+def _project(d, scale, a0, a1, a2, b0, b1, b2, geo, w_t, h_t):  # pragma: no cover - JIT
+    # One depth pixel (d depth units; ray terms a + b) -> thermal (u, v), Z and nearest-pixel
+    # index: -1 invalid depth, -2 outside the thermal image or the lens' valid radius.
+    one = np.float32(1.0)
+    two = np.float32(2.0)
+    z = np.float32(d) * scale
+    px = z * (a0 + b0) + geo[0]
+    py = z * (a1 + b1) + geo[1]
+    pz = z * (a2 + b2) + geo[2]
+    inv = one / pz
+    xn = px * inv
+    yn = py * inv
+    r2 = xn * xn + yn * yn
+    radial = one + r2 * (geo[7] + r2 * (geo[8] + r2 * geo[11]))
+    xy2 = two * xn * yn
+    xd = xn * radial + geo[9] * xy2 + geo[10] * (r2 + two * xn * xn)
+    yd = yn * radial + geo[9] * (r2 + two * yn * yn) + geo[10] * xy2
+    uu = geo[3] * xd + geo[5]
+    vv = geo[4] * yd + geo[6]
+    fu = np.floor(uu + np.float32(0.5))
+    fv = np.floor(vv + np.float32(0.5))
+    inside = (pz > 0) & (r2 <= geo[12]) & (fu >= 0) & (fu < w_t) & (fv >= 0) & (fv < h_t)
+    i = np.int32(fv) * np.int32(w_t) + np.int32(fu)
+    # plain conditionals compile to selects (a scalar np.where would allocate)
+    idx = np.int32(-1) if d == 0 else (i if inside else np.int32(-2))
+    return uu, vv, pz, idx
+
+
+@numba.njit(inline="always", **_JIT)
+def _project_row(drow, scale, a0, a1, a2, b, geo, w_t, h_t, ut, vt, zt, idx):  # pragma: no cover
+    # every pixel of one depth row; a loop of its own, without branches, so that it vectorises
+    for u in range(drow.size):
+        ut[u], vt[u], zt[u], idx[u] = _project(drow[u], scale, a0[u], a1[u], a2[u], b[0], b[1],
+                                               b[2], geo, w_t, h_t)
+
+
+@numba.njit(parallel=True, **_JIT)
+def _zbuffer(depth, scale, a0, a1, a2, brow, geo, h_t, w_t, n_chunks, zb, arg):  # pragma: no cover
+    # Per chunk of rows: the nearest Z per thermal pixel and the depth pixel (v * W + u) that
+    # gave it. Then merge the chunks into chunk 0.
+    h, w = depth.shape
+    for k in numba.prange(n_chunks):
+        zloc = zb[k]
+        aloc = arg[k]
+        zloc[:] = np.inf
+        aloc[:] = -1
+        ut = np.empty(w, np.float32)
+        vt = np.empty(w, np.float32)
+        zt = np.empty(w, np.float32)
+        idx = np.empty(w, np.int32)
+        for v in range(k * h // n_chunks, (k + 1) * h // n_chunks):
+            rv = min(v, a0.shape[0] - 1)
+            _project_row(depth[v], scale, a0[rv], a1[rv], a2[rv], brow[v], geo, w_t, h_t, ut, vt,
+                         zt, idx)
+            # neighbouring depth pixels mostly land in the same thermal pixel: find the
+            # nearest of each run, then touch the buffer once per run
+            run = np.int32(-3)
+            best = np.float32(np.inf)
+            best_u = 0
+            for u in range(w + 1):
+                i = idx[u] if u < w else np.int32(-3)
+                if i != run:
+                    if run >= 0 and best < zloc[run]:
+                        zloc[run] = best
+                        aloc[run] = v * w + best_u
+                    run = i
+                    best = np.float32(np.inf)
+                if i >= 0 and zt[u] < best:
+                    best = zt[u]
+                    best_u = u
+    for i in numba.prange(zb.shape[1]):
+        for k in range(1, n_chunks):
+            if zb[k, i] < zb[0, i]:
+                zb[0, i] = zb[k, i]
+                arg[0, i] = arg[k, i]
+
+
+@numba.njit(parallel=True, **_JIT)
+def _sample(depth, scale, a0, a1, a2, brow, geo, zbuf, thermal, tol_sigma, tol_slope,
+            bilinear, n_chunks, out, reason):  # pragma: no cover - JIT
+    h, w = depth.shape
+    h_t, w_t = thermal.shape
+    flat = thermal.ravel()
+    nan = np.float32(np.nan)
+    for k in numba.prange(n_chunks):
+        ut = np.empty(w, np.float32)
+        vt = np.empty(w, np.float32)
+        zt = np.empty(w, np.float32)
+        idx = np.empty(w, np.int32)
+        for v in range(k * h // n_chunks, (k + 1) * h // n_chunks):
+            rv = min(v, a0.shape[0] - 1)
+            _project_row(depth[v], scale, a0[rv], a1[rv], a2[rv], brow[v], geo, w_t, h_t, ut, vt,
+                         zt, idx)
+            orow = out[v]
+            rrow = reason[v]
+            for u in range(w):
+                i = idx[u]
+                j = np.uint32(i) if i >= 0 else np.uint32(0)  # unsigned: no wraparound check
+                pz = zt[u]
+                # hidden when the thermal pixel's nearest surface is clearly in front: beyond
+                # the depth noise (sigma ~ z^2) and the spread of a slanted surface in a pixel
+                tol = tol_sigma * pz * pz + tol_slope * pz
+                occluded = (i >= 0) & (pz > zbuf[j] + tol)
+                value = flat[j]
+                orow[u] = value if (i >= 0) & ~occluded else nan
+                rrow[u] = np.uint8(1) if i == -1 else (
+                    np.uint8(2) if i == -2 else (np.uint8(3) if occluded else np.uint8(0)))
+            if bilinear:
+                _bilinear_row(ut, vt, zt, rrow, orow, zbuf, thermal, tol_sigma, tol_slope)
+
+
+@numba.njit(inline="always", **_JIT)
+def _bilinear_row(ut, vt, zt, rrow, orow, zbuf, thermal, tol_sigma, tol_slope):  # pragma: no cover
+    # bilinear over the neighbours that see the same surface as the depth pixel
+    h_t, w_t = thermal.shape
+    for u in range(ut.size):
+        if rrow[u] != 0:
+            continue
+        pz = zt[u]
+        tol = tol_sigma * pz * pz + tol_slope * pz
+        u0 = int(np.floor(ut[u]))
+        v0 = int(np.floor(vt[u]))
+        fu = ut[u] - np.float32(u0)
+        fv = vt[u] - np.float32(v0)
+        acc = np.float32(0.0)
+        wsum = np.float32(0.0)
+        for dv in range(2):
+            for du in range(2):
+                uu = min(max(u0 + du, 0), w_t - 1)
+                vv = min(max(v0 + dv, 0), h_t - 1)
+                wgt = (fu if du else np.float32(1.0) - fu) * (fv if dv else np.float32(1.0) - fv)
+                if wgt > 0 and pz <= zbuf[vv * w_t + uu] + tol:
+                    acc += wgt * thermal[vv, uu]
+                    wsum += wgt
+        if wsum > 0:
+            orow[u] = acc / wsum
+
+
+# ---------------------------------------------------------------------------------------------
+# the Registration object
+# ---------------------------------------------------------------------------------------------
+
+REGISTRATION_METHODS = ("reproject", "paper")
+
+
+@dataclass(frozen=True)
+class OcclusionTolerance:
+    """How much farther than the thermal pixel's nearest surface a point may be and still be
+    seen: n_sigma * sigma_z(z) + slope * z / fx_thermal.
+
+    sigma_z = z^2 subpixel / (fx_depth baseline) is the depth camera's noise model (D435:
+    subpixel 0.08, baseline 50 mm). The z-buffer keeps the minimum of ~20 noisy samples per
+    thermal pixel, so a point of the same surface can lie ~5 sigma behind it: n_sigma = 6.
+    slope = 2 lets surfaces slanted up to ~63 deg to the thermal ray spread their depth
+    across a thermal pixel without hiding themselves.
+    """
+
+    n_sigma: float = 6.0
+    subpixel: float = 0.08
+    stereo_baseline_m: float = 0.050
+    slope: float = 2.0
+
+
+class Registration:
+    """Maps between the depth grid (H, W) and the thermal grid (h, w) of one calibration.
+
+    method: ``"reproject"`` (exact, occlusion-aware; default) or ``"paper"`` (the paper's
+    nearest-neighbour upscale, fitted at ``paper_reference_m``).
+    """
+
+    def __init__(self, calibration: Calibration, method: str = "reproject",
+                 tolerance: OcclusionTolerance | None = None, paper_reference_m: float = 1.5,
+                 ) -> None:
+        if method not in REGISTRATION_METHODS:
+            raise ValueError(f"unknown registration method {method!r}; "
+                             f"choose from {list(REGISTRATION_METHODS)}")
+        self.calibration = calibration
+        self.method = method
+        self.tolerance = tolerance or OcclusionTolerance()
+        self.paper_reference_m = paper_reference_m
+        d, t = calibration.depth, calibration.thermal
+        self._rays = _ray_terms(calibration)
+        tr = calibration.thermal_from_depth.translation_m
+        self._geo = np.array([*tr, t.fx, t.fy, t.cx, t.cy, *t.distortion,
+                              min(t.max_radius2, 1e30)], dtype=np.float32)
+        self._scale = np.float32(calibration.depth_scale_m)
+        tol = self.tolerance
+        self._tol_sigma = np.float32(tol.n_sigma * tol.subpixel / (d.fx * tol.stereo_baseline_m))
+        self._tol_slope = np.float32(tol.slope / t.fx)
+        self._n_chunks = max(1, numba.get_num_threads())
+        if method == "paper":
+            self._paper = _fit_paper_map(calibration, paper_reference_m)
+
+    @classmethod
+    def from_file(cls, path: str | Path, method: str = "reproject", **kwargs: object
+                  ) -> Registration:
+        """Registration from a calibration file (YAML or JSON)."""
+        return cls(Calibration.load(path), method, **kwargs)  # type: ignore[arg-type]
+
+    # -- checks ------------------------------------------------------------------------------
+
+    def _check_depth(self, depth: NDArray[np.uint16]) -> NDArray[np.uint16]:
+        shape = self.calibration.depth.shape
+        if not isinstance(depth, np.ndarray) or depth.dtype != np.uint16 or depth.shape != shape:
+            got = (f"{depth.dtype} {depth.shape}" if isinstance(depth, np.ndarray)
+                   else type(depth).__name__)
+            raise ValueError(f"depth must be a uint16 array of shape {shape} (H, W) in depth "
+                             f"units, got {got}")
+        return np.ascontiguousarray(depth)
+
+    def _check_thermal(self, thermal: NDArray[np.generic]) -> FloatArray:
+        shape = self.calibration.thermal.shape
+        if not isinstance(thermal, np.ndarray) or thermal.shape != shape or \
+                thermal.dtype.kind not in "uif":
+            got = (f"{thermal.dtype} {thermal.shape}" if isinstance(thermal, np.ndarray)
+                   else type(thermal).__name__)
+            raise ValueError(f"thermal must be a numeric array of shape {shape} (h, w) "
+                             f"(uint16 counts or float), got {got}")
+        return np.ascontiguousarray(thermal, dtype=np.float32)
+
+    # -- depth -> thermal --------------------------------------------------------------------
+
+    def _zbuffer(self, depth: NDArray[np.uint16]) -> tuple[FloatArray, NDArray[np.int64]]:
+        """Nearest Z per thermal pixel (flat, inf where none) and its depth pixel (-1)."""
+        h_t, w_t = self.calibration.thermal.shape
+        zb = np.empty((self._n_chunks, h_t * w_t), dtype=np.float32)
+        arg = np.empty((self._n_chunks, h_t * w_t), dtype=np.int64)
+        _zbuffer(depth, self._scale, *self._rays, self._geo, h_t, w_t, self._n_chunks, zb, arg)
+        return zb[0], arg[0]
+
+    def depth_to_thermal(self, depth: NDArray[np.uint16]) -> DepthOnThermal:
+        """Distance of the nearest surface seen by each thermal pixel.
+
+        depth: (H, W) uint16 in depth units (0 = invalid). Returns float32 (h, w) arrays:
+        Z along the thermal optical axis and the range (metres), NaN where no depth pixel
+        lands. ``"paper"``: the depth pixel the upscale maps to each thermal pixel's centre
+        (Z and range in the depth camera's frame).
+        """
+        depth = self._check_depth(depth)
+        h_t, w_t = self.calibration.thermal.shape
+        if self.method == "paper":
+            return self._paper_depth_to_thermal(depth)
+        zbuf, arg = self._zbuffer(depth)
+        z = np.where(np.isfinite(zbuf), zbuf, np.float32(np.nan)).reshape(h_t, w_t)
+        return DepthOnThermal(z, self._ranges(depth, arg).reshape(h_t, w_t))
+
+    def _ranges(self, depth: NDArray[np.uint16], arg: NDArray[np.int64]) -> FloatArray:
+        """Range (m) in the thermal frame of the depth pixels ``arg`` (flat index; -1: NaN)."""
+        a0, a1, a2, brow = self._rays
+        ok = arg >= 0
+        v, u = np.divmod(arg[ok], depth.shape[1])
+        rv = np.minimum(v, a0.shape[0] - 1)
+        z = depth[v, u].astype(np.float32) * self._scale
+        p = [z * (a[rv, u] + brow[v, i]) + self._geo[i] for i, a in enumerate((a0, a1, a2))]
+        out = np.full(arg.shape, np.nan, dtype=np.float32)
+        out[ok] = np.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2)
+        return out
+
+    # -- thermal -> depth --------------------------------------------------------------------
+
+    def thermal_to_depth(self, depth: NDArray[np.uint16], thermal: NDArray[np.generic],
+                         interpolation: str = "nearest", nearest: DepthOnThermal | None = None,
+                         ) -> ThermalOnDepth:
+        """The thermal value seen at every depth pixel.
+
+        depth: (H, W) uint16 depth units; thermal: (h, w) counts (uint16) or float (e.g.
+        temperatures). interpolation: ``"nearest"`` or ``"bilinear"`` (over the neighbours
+        that see the same surface). nearest: :meth:`depth_to_thermal` of this same depth
+        frame, if already computed: its Z is the z-buffer of the occlusion test, which is
+        then not computed again. Returns float32 (H, W) values, NaN where
+        ``reason != Reason.OK`` (invalid depth, outside the thermal image, occluded).
+        """
+        depth = self._check_depth(depth)
+        therm = self._check_thermal(thermal)
+        if interpolation not in ("nearest", "bilinear"):
+            raise ValueError(f"interpolation must be 'nearest' or 'bilinear', got "
+                             f"{interpolation!r}")
+        if self.method == "paper":
+            return self._paper_thermal_to_depth(depth, therm, interpolation)
+        if nearest is None:
+            zbuf = self._zbuffer(depth)[0]
+        else:
+            zbuf = np.where(np.isnan(nearest.z_m), np.float32(np.inf), nearest.z_m).ravel()
+        out = np.empty(depth.shape, dtype=np.float32)
+        reason = np.empty(depth.shape, dtype=np.uint8)
+        _sample(depth, self._scale, *self._rays, self._geo, zbuf, therm, self._tol_sigma,
+                self._tol_slope, interpolation == "bilinear", self._n_chunks, out, reason)
+        return ThermalOnDepth(out, reason)
+
+    # -- the paper's method ------------------------------------------------------------------
+
+    def thermal_pixel_of_depth(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``"paper"``: the thermal (u, v) the upscale assigns to depth columns and rows."""
+        a_u, b_u, a_v, b_v = self._paper
+        d = self.calibration.depth
+        return a_u * np.arange(d.width) + b_u, a_v * np.arange(d.height) + b_v
+
+    def _paper_thermal_to_depth(self, depth: NDArray[np.uint16], therm: FloatArray,
+                                interpolation: str) -> ThermalOnDepth:
+        import cv2
+
+        ut, vt = self.thermal_pixel_of_depth()
+        t = self.calibration.thermal
+        map_u = np.broadcast_to(ut.astype(np.float32), depth.shape)
+        map_v = np.broadcast_to(vt.astype(np.float32)[:, None], depth.shape)
+        flag = cv2.INTER_NEAREST if interpolation == "nearest" else cv2.INTER_LINEAR
+        out = cv2.remap(therm, np.ascontiguousarray(map_u), np.ascontiguousarray(map_v), flag,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+        inside = ((map_u >= -0.5) & (map_u < t.width - 0.5) & (map_v >= -0.5)
+                  & (map_v < t.height - 0.5))
+        reason = np.where(depth == 0, Reason.INVALID_DEPTH,
+                          np.where(inside, Reason.OK, Reason.OUTSIDE)).astype(np.uint8)
+        out[reason != Reason.OK] = np.nan
+        return ThermalOnDepth(out, reason)
+
+    def _paper_depth_to_thermal(self, depth: NDArray[np.uint16]) -> DepthOnThermal:
+        a_u, b_u, a_v, b_v = self._paper
+        d, t = self.calibration.depth, self.calibration.thermal
+        cols = np.rint((np.arange(t.width) - b_u) / a_u).astype(int)
+        rows = np.rint((np.arange(t.height) - b_v) / a_v).astype(int)
+        ok_c = (cols >= 0) & (cols < d.width)
+        ok_r = (rows >= 0) & (rows < d.height)
+        z = np.full(t.shape, np.nan, dtype=np.float32)
+        sub = depth[np.ix_(rows[ok_r], cols[ok_c])].astype(np.float32) * self._scale
+        z[np.ix_(ok_r, ok_c)] = np.where(sub > 0, sub, np.nan)
+        uu, vv = np.meshgrid(cols[ok_c], rows[ok_r])
+        x, y = d.normalized_from_pixels(np.stack([uu, vv], axis=-1))
+        rng = np.full(t.shape, np.nan, dtype=np.float32)
+        rng[np.ix_(ok_r, ok_c)] = z[np.ix_(ok_r, ok_c)] * np.sqrt(x * x + y * y + 1)
+        return DepthOnThermal(z, rng)
+
+
+def _ray_terms(cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Per-column (a0, a1, a2) and per-row (brow, (H, 3)) terms of R @ ray, float32.
+
+    R ray = x R[:, 0] + y R[:, 1] + R[:, 2] with x per column and y per row when the depth
+    camera has no distortion: A_u = x_u R[:, 0] (shape (1, W) each), B_v = y_v R[:, 1] +
+    R[:, 2]. With distortion the rays are not separable: A holds R @ ray for every pixel
+    (H, W) and B is zero.
+    """
+    d = cal.depth
+    rot = cal.thermal_from_depth.rotation
+    if not d.has_distortion:
+        x = (np.arange(d.width) - d.cx) / d.fx
+        y = (np.arange(d.height) - d.cy) / d.fy
+        a = [np.ascontiguousarray((x * rot[i, 0])[None, :], dtype=np.float32) for i in range(3)]
+        b = y[:, None] * rot[:, 1] + rot[:, 2]
+        return a[0], a[1], a[2], np.ascontiguousarray(b, dtype=np.float32)
+    u, v = d.pixel_grid()
+    x, y = d.normalized_from_pixels(np.stack([u, v], axis=-1))
+    a = [np.ascontiguousarray(x * rot[i, 0] + y * rot[i, 1] + rot[i, 2], dtype=np.float32)
+         for i in range(3)]
+    return a[0], a[1], a[2], np.zeros((d.height, 3), dtype=np.float32)
+
+
+def _fit_paper_map(cal: Calibration, distance_m: float) -> tuple[float, float, float, float]:
+    """The paper's crop/offset + upscale as u_t = a_u u_d + b_u, v_t = a_v v_d + b_v, fitted
+    (least squares) to the exact mapping of a plane at ``distance_m`` (section 2.2)."""
+    d = cal.depth
+    u, v = d.pixel_grid()
+    step = 8
+    uu, vv = u[::step, ::step], v[::step, ::step]
+    pts = cal.thermal_from_depth.apply(d.deproject(np.stack([uu, vv], -1), distance_m))
+    px = cal.thermal.project(pts)
+    ok = np.isfinite(px).all(axis=-1) & cal.thermal.contains(px)
+    a_u, b_u = np.polyfit(uu[ok], px[ok][:, 0], 1)
+    a_v, b_v = np.polyfit(vv[ok], px[ok][:, 1], 1)
+    return float(a_u), float(b_u), float(a_v), float(b_v)
