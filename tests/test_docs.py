@@ -21,7 +21,7 @@ BLOCKS = [
 @pytest.mark.parametrize(("block", "doc"), BLOCKS)
 def test_doc_python_example(block: str, doc: Path) -> None:
     # each top-level `print(...)  # value` line documents the value it prints
-    claims = re.findall(r"^print\(.*\)\s*#\s*(.+)$", block, flags=re.M)
+    claims = re.findall(r"^print\(.*\)[ \t]*#[ \t]*(.+)$", block, flags=re.M)
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         exec(compile(block, str(doc), "exec"), {})

@@ -20,8 +20,6 @@ from thermodepth.radiometry import (
 from thermodepth.sim import (
     DepthCameraModel,
     LeptonModel,
-    Material,
-    Rect,
     Rig,
     Scene,
     camera_pose,
@@ -30,6 +28,7 @@ from thermodepth.sim import (
     occlusion_scene,
     plate_scene,
     steps_fpa,
+    wall_scene,
 )
 from thermodepth.sim.d435 import depth_sigma_m
 from thermodepth.sim.lepton import (
@@ -45,9 +44,9 @@ K0 = 273.15
 T_REF = LeptonModel().vox_reference_temp_k
 
 
-def wall_scene(temp_k: float, z_m: float, emissivity: float = 1.0) -> Scene:
-    wall = Rect([0, 0, z_m], [1, 0, 0], [0, 1, 0], 50.0, 50.0, Material(temp_k, emissivity))
-    return Scene((wall,), ambient_temp_k=temp_k)
+def flat_scene(temp_k: float, z_m: float) -> Scene:
+    """A blackbody wall filling the view, in surroundings at its own temperature."""
+    return wall_scene(z_m, temp_k - K0, emissivity=1.0, ambient_temp_c=temp_k - K0)
 
 
 IDENTITY = RigidTransform.identity("world", "depth")
@@ -75,7 +74,7 @@ def test_counts_follow_paper_constants() -> None:
 
 
 def test_netd_of_flat_scene() -> None:
-    rig = Rig(wall_scene(300.0, 2.0), IDENTITY, fpa=constant_fpa(T_REF), seed=3, start_s=1.0)
+    rig = Rig(flat_scene(300.0, 2.0), IDENTITY, fpa=constant_fpa(T_REF), seed=3, start_s=1.0)
     frames = np.stack([f.thermal.astype(float) for f in rig.frames(60)])
     per_pixel_sd = frames.std(axis=0, ddof=1).mean()
     model = LeptonModel()
@@ -86,7 +85,7 @@ def test_netd_of_flat_scene() -> None:
 
 @pytest.mark.parametrize("z_m", [0.6, 1.5, 3.0, 6.0])
 def test_depth_noise_follows_z_squared_model(z_m: float) -> None:
-    rig = Rig(wall_scene(298.15, z_m), IDENTITY, seed=int(z_m * 10))
+    rig = Rig(flat_scene(298.15, z_m), IDENTITY, seed=int(z_m * 10))
     frame = rig.frame()
     cal = rig.calibration
     valid = frame.depth > 0
@@ -98,8 +97,8 @@ def test_depth_noise_follows_z_squared_model(z_m: float) -> None:
 
 
 def test_depth_range_limits() -> None:
-    near = Rig(wall_scene(298.15, 0.15), IDENTITY).frame()
-    far = Rig(wall_scene(298.15, 12.0), IDENTITY).frame()
+    near = Rig(flat_scene(298.15, 0.15), IDENTITY).frame()
+    far = Rig(flat_scene(298.15, 12.0), IDENTITY).frame()
     assert not near.depth.any() and not far.depth.any()
 
 
@@ -211,7 +210,7 @@ def test_timestamps_and_telemetry() -> None:
 def test_ffc_cycle_flags_frames_and_resets_fixed_pattern() -> None:
     # FPA steps by 2 K at t = 5 s: more than ffc_delta_k, so an FFC follows
     fpa = steps_fpa([0.0, 5.0], [305.0, 307.0])
-    rig = Rig(wall_scene(300.0, 2.0), IDENTITY, fpa=fpa, seed=1)
+    rig = Rig(flat_scene(300.0, 2.0), IDENTITY, fpa=fpa, seed=1)
     frames = list(rig.frames(70))
     states = [f.telemetry.ffc_state for f in frames]
     assert states[0] == FfcState.IN_PROGRESS  # the power-on FFC
@@ -245,7 +244,7 @@ def test_ground_truth_correspondences_reproject_exactly() -> None:
     np.testing.assert_allclose(back, pts_t, atol=1e-9)
 
 
-def test_occluded_pixels_are_wall_left_of_the_box() -> None:
+def test_occluded_pixels_are_wall_right_of_the_box() -> None:
     scene = occlusion_scene(box_distance_m=0.8, wall_distance_m=2.0)
     rig = Rig(scene, RigidTransform.identity("world", "depth"))
     truth = rig.truth()
@@ -255,10 +254,10 @@ def test_occluded_pixels_are_wall_left_of_the_box() -> None:
     assert not np.isin(truth.depth_rect[occ], box_ids).any()  # the box itself is never hidden
     box_cols = np.flatnonzero(np.isin(truth.depth_rect[360], box_ids))
     box_rows = np.flatnonzero(np.isin(truth.depth_rect[:, 640], box_ids))
-    # on the box's middle row the hidden band lies left of it: the thermal camera sits 40 mm
-    # to the right; its width ~ fx_d * baseline_x * (1/z_box - 1/z_wall)
+    # on the box's middle row the hidden band lies right of it: the thermal camera sits 40 mm
+    # to the left; its width ~ fx_d * baseline_x * (1/z_box - 1/z_wall)
     row = np.flatnonzero(occ[360])
-    assert row.max() < box_cols.min()
+    assert row.min() > box_cols.max()
     expected = 645.0 * 0.040 * (1 / 0.8 - 1 / 2.0)
     assert row.size == pytest.approx(expected, rel=0.15)
     # 6 mm of vertical offset hides a thin band (~3 px) along a horizontal edge

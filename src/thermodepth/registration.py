@@ -15,9 +15,9 @@ Methods (``REGISTRATION_METHODS``):
 - ``"reproject"`` (default): every depth pixel is deprojected with its depth, moved into the
   thermal frame and projected through the thermal lens (OpenCV distortion, refused beyond the
   radius where the polynomial folds). Exact up to the depth noise.
-- ``"paper"``: Lin & Yao 2022, section 2.2: the thermal image is cropped/offset and upscaled
-  to the depth grid with nearest neighbour, an affine map that is right at one reference
-  distance only (parallax error elsewhere). No occlusion test.
+- ``"paper"``: Lin & Yao 2022, sections 2.1-2.2: the thermal image is undistorted, then
+  cropped/offset and upscaled to the depth grid with nearest neighbour: an affine map that is
+  right at one reference distance only (parallax error elsewhere). No occlusion test.
 
 Kernels are numba, multi-threaded over rows, float32 inside; compiled once and cached on
 disk.
@@ -28,14 +28,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from .calibration import Calibration
-from .camera import Intrinsics
 
 FloatArray = NDArray[np.float32]
 
@@ -67,7 +66,7 @@ class ThermalOnDepth(NamedTuple):
 # kernels
 # ---------------------------------------------------------------------------------------------
 
-_JIT = {"cache": True, "fastmath": True, "error_model": "numpy"}
+_JIT: dict[str, Any] = {"cache": True, "fastmath": True, "error_model": "numpy"}
 
 # geo (float32): t (3), fx, fy, cx, cy, k1, k2, p1, p2, k3, r2max of the thermal camera.
 # Rays: the depth pixel (u, v) at depth z is the point P = R (z ray) + t = z (A_u + B_v) + t in
@@ -108,8 +107,9 @@ def _project(d, scale, a0, a1, a2, b0, b1, b2, geo, w_t, h_t):  # pragma: no cov
 def _project_row(drow, scale, a0, a1, a2, b, geo, w_t, h_t, ut, vt, zt, idx):  # pragma: no cover
     # every pixel of one depth row; a loop of its own, without branches, so that it vectorises
     for u in range(drow.size):
-        ut[u], vt[u], zt[u], idx[u] = _project(drow[u], scale, a0[u], a1[u], a2[u], b[0], b[1],
-                                               b[2], geo, w_t, h_t)
+        ut[u], vt[u], zt[u], idx[u] = _project(
+            drow[u], scale, a0[u], a1[u], a2[u], b[0], b[1], b[2], geo, w_t, h_t
+        )
 
 
 @numba.njit(parallel=True, **_JIT)
@@ -128,24 +128,14 @@ def _zbuffer(depth, scale, a0, a1, a2, brow, geo, h_t, w_t, n_chunks, zb, arg): 
         idx = np.empty(w, np.int32)
         for v in range(k * h // n_chunks, (k + 1) * h // n_chunks):
             rv = min(v, a0.shape[0] - 1)
-            _project_row(depth[v], scale, a0[rv], a1[rv], a2[rv], brow[v], geo, w_t, h_t, ut, vt,
-                         zt, idx)
-            # neighbouring depth pixels mostly land in the same thermal pixel: find the
-            # nearest of each run, then touch the buffer once per run
-            run = np.int32(-3)
-            best = np.float32(np.inf)
-            best_u = 0
-            for u in range(w + 1):
-                i = idx[u] if u < w else np.int32(-3)
-                if i != run:
-                    if run >= 0 and best < zloc[run]:
-                        zloc[run] = best
-                        aloc[run] = v * w + best_u
-                    run = i
-                    best = np.float32(np.inf)
-                if i >= 0 and zt[u] < best:
-                    best = zt[u]
-                    best_u = u
+            _project_row(
+                depth[v], scale, a0[rv], a1[rv], a2[rv], brow[v], geo, w_t, h_t, ut, vt, zt, idx
+            )
+            for u in range(w):
+                i = idx[u]
+                if i >= 0 and zt[u] < zloc[i]:
+                    zloc[i] = zt[u]
+                    aloc[i] = v * w + u
     for i in numba.prange(zb.shape[1]):
         for k in range(1, n_chunks):
             if zb[k, i] < zb[0, i]:
@@ -154,8 +144,23 @@ def _zbuffer(depth, scale, a0, a1, a2, brow, geo, h_t, w_t, n_chunks, zb, arg): 
 
 
 @numba.njit(parallel=True, **_JIT)
-def _sample(depth, scale, a0, a1, a2, brow, geo, zbuf, thermal, tol_sigma, tol_slope,
-            bilinear, n_chunks, out, reason):  # pragma: no cover - JIT
+def _sample(
+    depth,
+    scale,
+    a0,
+    a1,
+    a2,
+    brow,
+    geo,
+    zbuf,
+    thermal,
+    tol_sigma,
+    tol_slope,
+    bilinear,
+    n_chunks,
+    out,
+    reason,
+):  # pragma: no cover - JIT
     h, w = depth.shape
     h_t, w_t = thermal.shape
     flat = thermal.ravel()
@@ -165,24 +170,33 @@ def _sample(depth, scale, a0, a1, a2, brow, geo, zbuf, thermal, tol_sigma, tol_s
         vt = np.empty(w, np.float32)
         zt = np.empty(w, np.float32)
         idx = np.empty(w, np.int32)
+        val = np.empty(w, np.float32)
+        near = np.empty(w, np.float32)
         for v in range(k * h // n_chunks, (k + 1) * h // n_chunks):
             rv = min(v, a0.shape[0] - 1)
-            _project_row(depth[v], scale, a0[rv], a1[rv], a2[rv], brow[v], geo, w_t, h_t, ut, vt,
-                         zt, idx)
+            _project_row(
+                depth[v], scale, a0[rv], a1[rv], a2[rv], brow[v], geo, w_t, h_t, ut, vt, zt, idx
+            )
+            # three simple loops beat one fused loop: the first and last vectorise
+            for u in range(w):
+                j = max(idx[u], np.int32(0))
+                val[u] = flat[j]
+                near[u] = zbuf[j]
             orow = out[v]
             rrow = reason[v]
             for u in range(w):
                 i = idx[u]
-                j = np.uint32(i) if i >= 0 else np.uint32(0)  # unsigned: no wraparound check
                 pz = zt[u]
                 # hidden when the thermal pixel's nearest surface is clearly in front: beyond
                 # the depth noise (sigma ~ z^2) and the spread of a slanted surface in a pixel
                 tol = tol_sigma * pz * pz + tol_slope * pz
-                occluded = (i >= 0) & (pz > zbuf[j] + tol)
-                value = flat[j]
-                orow[u] = value if (i >= 0) & ~occluded else nan
-                rrow[u] = np.uint8(1) if i == -1 else (
-                    np.uint8(2) if i == -2 else (np.uint8(3) if occluded else np.uint8(0)))
+                occluded = (i >= 0) & (pz > near[u] + tol)
+                orow[u] = val[u] if (i >= 0) & ~occluded else nan
+                rrow[u] = np.uint8(
+                    np.int32(i == -1) * Reason.INVALID_DEPTH
+                    + np.int32(i == -2) * Reason.OUTSIDE
+                    + np.int32(occluded) * Reason.OCCLUDED
+                )
             if bilinear:
                 _bilinear_row(ut, vt, zt, rrow, orow, zbuf, thermal, tol_sigma, tol_slope)
 
@@ -246,12 +260,17 @@ class Registration:
     nearest-neighbour upscale, fitted at ``paper_reference_m``).
     """
 
-    def __init__(self, calibration: Calibration, method: str = "reproject",
-                 tolerance: OcclusionTolerance | None = None, paper_reference_m: float = 1.5,
-                 ) -> None:
+    def __init__(
+        self,
+        calibration: Calibration,
+        method: str = "reproject",
+        tolerance: OcclusionTolerance | None = None,
+        paper_reference_m: float = 1.5,
+    ) -> None:
         if method not in REGISTRATION_METHODS:
-            raise ValueError(f"unknown registration method {method!r}; "
-                             f"choose from {list(REGISTRATION_METHODS)}")
+            raise ValueError(
+                f"unknown registration method {method!r}; choose from {list(REGISTRATION_METHODS)}"
+            )
         self.calibration = calibration
         self.method = method
         self.tolerance = tolerance or OcclusionTolerance()
@@ -259,19 +278,22 @@ class Registration:
         d, t = calibration.depth, calibration.thermal
         self._rays = _ray_terms(calibration)
         tr = calibration.thermal_from_depth.translation_m
-        self._geo = np.array([*tr, t.fx, t.fy, t.cx, t.cy, *t.distortion,
-                              min(t.max_radius2, 1e30)], dtype=np.float32)
+        self._geo = np.array(
+            [*tr, t.fx, t.fy, t.cx, t.cy, *t.distortion, min(t.max_radius2, 1e30)], dtype=np.float32
+        )
         self._scale = np.float32(calibration.depth_scale_m)
         tol = self.tolerance
         self._tol_sigma = np.float32(tol.n_sigma * tol.subpixel / (d.fx * tol.stereo_baseline_m))
         self._tol_slope = np.float32(tol.slope / t.fx)
         self._n_chunks = max(1, numba.get_num_threads())
         if method == "paper":
-            self._paper = _fit_paper_map(calibration, paper_reference_m)
+            self._paper_affine = _fit_paper_map(calibration, paper_reference_m)
+            self._paper = _paper_sampling_maps(calibration, self._paper_affine)
 
     @classmethod
-    def from_file(cls, path: str | Path, method: str = "reproject", **kwargs: object
-                  ) -> Registration:
+    def from_file(
+        cls, path: str | Path, method: str = "reproject", **kwargs: object
+    ) -> Registration:
         """Registration from a calibration file (YAML or JSON)."""
         return cls(Calibration.load(path), method, **kwargs)  # type: ignore[arg-type]
 
@@ -280,20 +302,32 @@ class Registration:
     def _check_depth(self, depth: NDArray[np.uint16]) -> NDArray[np.uint16]:
         shape = self.calibration.depth.shape
         if not isinstance(depth, np.ndarray) or depth.dtype != np.uint16 or depth.shape != shape:
-            got = (f"{depth.dtype} {depth.shape}" if isinstance(depth, np.ndarray)
-                   else type(depth).__name__)
-            raise ValueError(f"depth must be a uint16 array of shape {shape} (H, W) in depth "
-                             f"units, got {got}")
+            got = (
+                f"{depth.dtype} {depth.shape}"
+                if isinstance(depth, np.ndarray)
+                else type(depth).__name__
+            )
+            raise ValueError(
+                f"depth must be a uint16 array of shape {shape} (H, W) in depth units, got {got}"
+            )
         return np.ascontiguousarray(depth)
 
     def _check_thermal(self, thermal: NDArray[np.generic]) -> FloatArray:
         shape = self.calibration.thermal.shape
-        if not isinstance(thermal, np.ndarray) or thermal.shape != shape or \
-                thermal.dtype.kind not in "uif":
-            got = (f"{thermal.dtype} {thermal.shape}" if isinstance(thermal, np.ndarray)
-                   else type(thermal).__name__)
-            raise ValueError(f"thermal must be a numeric array of shape {shape} (h, w) "
-                             f"(uint16 counts or float), got {got}")
+        if (
+            not isinstance(thermal, np.ndarray)
+            or thermal.shape != shape
+            or thermal.dtype.kind not in "uif"
+        ):
+            got = (
+                f"{thermal.dtype} {thermal.shape}"
+                if isinstance(thermal, np.ndarray)
+                else type(thermal).__name__
+            )
+            raise ValueError(
+                f"thermal must be a numeric array of shape {shape} (h, w) "
+                f"(uint16 counts or float), got {got}"
+            )
         return np.ascontiguousarray(thermal, dtype=np.float32)
 
     # -- depth -> thermal --------------------------------------------------------------------
@@ -336,9 +370,13 @@ class Registration:
 
     # -- thermal -> depth --------------------------------------------------------------------
 
-    def thermal_to_depth(self, depth: NDArray[np.uint16], thermal: NDArray[np.generic],
-                         interpolation: str = "nearest", nearest: DepthOnThermal | None = None,
-                         ) -> ThermalOnDepth:
+    def thermal_to_depth(
+        self,
+        depth: NDArray[np.uint16],
+        thermal: NDArray[np.generic],
+        interpolation: str = "nearest",
+        nearest: DepthOnThermal | None = None,
+    ) -> ThermalOnDepth:
         """The thermal value seen at every depth pixel.
 
         depth: (H, W) uint16 depth units; thermal: (h, w) counts (uint16) or float (e.g.
@@ -351,8 +389,9 @@ class Registration:
         depth = self._check_depth(depth)
         therm = self._check_thermal(thermal)
         if interpolation not in ("nearest", "bilinear"):
-            raise ValueError(f"interpolation must be 'nearest' or 'bilinear', got "
-                             f"{interpolation!r}")
+            raise ValueError(
+                f"interpolation must be 'nearest' or 'bilinear', got {interpolation!r}"
+            )
         if self.method == "paper":
             return self._paper_thermal_to_depth(depth, therm, interpolation)
         if nearest is None:
@@ -361,50 +400,65 @@ class Registration:
             zbuf = np.where(np.isnan(nearest.z_m), np.float32(np.inf), nearest.z_m).ravel()
         out = np.empty(depth.shape, dtype=np.float32)
         reason = np.empty(depth.shape, dtype=np.uint8)
-        _sample(depth, self._scale, *self._rays, self._geo, zbuf, therm, self._tol_sigma,
-                self._tol_slope, interpolation == "bilinear", self._n_chunks, out, reason)
+        _sample(
+            depth,
+            self._scale,
+            *self._rays,
+            self._geo,
+            zbuf,
+            therm,
+            self._tol_sigma,
+            self._tol_slope,
+            interpolation == "bilinear",
+            self._n_chunks,
+            out,
+            reason,
+        )
         return ThermalOnDepth(out, reason)
 
     # -- the paper's method ------------------------------------------------------------------
 
-    def thermal_pixel_of_depth(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``"paper"``: the thermal (u, v) the upscale assigns to depth columns and rows."""
-        a_u, b_u, a_v, b_v = self._paper
-        d = self.calibration.depth
-        return a_u * np.arange(d.width) + b_u, a_v * np.arange(d.height) + b_v
+    def thermal_pixel_of_depth(self) -> tuple[FloatArray, FloatArray]:
+        """``"paper"``: the raw thermal (u, v) each depth pixel samples, float32 (H, W) each."""
+        return self._paper
 
-    def _paper_thermal_to_depth(self, depth: NDArray[np.uint16], therm: FloatArray,
-                                interpolation: str) -> ThermalOnDepth:
+    def _paper_thermal_to_depth(
+        self, depth: NDArray[np.uint16], therm: FloatArray, interpolation: str
+    ) -> ThermalOnDepth:
         import cv2
 
-        ut, vt = self.thermal_pixel_of_depth()
+        map_u, map_v = self._paper
         t = self.calibration.thermal
-        map_u = np.broadcast_to(ut.astype(np.float32), depth.shape)
-        map_v = np.broadcast_to(vt.astype(np.float32)[:, None], depth.shape)
         flag = cv2.INTER_NEAREST if interpolation == "nearest" else cv2.INTER_LINEAR
-        out = cv2.remap(therm, np.ascontiguousarray(map_u), np.ascontiguousarray(map_v), flag,
-                        borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
-        inside = ((map_u >= -0.5) & (map_u < t.width - 0.5) & (map_v >= -0.5)
-                  & (map_v < t.height - 0.5))
-        reason = np.where(depth == 0, Reason.INVALID_DEPTH,
-                          np.where(inside, Reason.OK, Reason.OUTSIDE)).astype(np.uint8)
+        out = np.asarray(
+            cv2.remap(
+                therm, map_u, map_v, flag, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan
+            ),
+            dtype=np.float32,
+        )
+        inside = (
+            (map_u >= -0.5) & (map_u < t.width - 0.5) & (map_v >= -0.5) & (map_v < t.height - 0.5)
+        )
+        reason = np.where(
+            depth == 0, Reason.INVALID_DEPTH, np.where(inside, Reason.OK, Reason.OUTSIDE)
+        ).astype(np.uint8)
         out[reason != Reason.OK] = np.nan
         return ThermalOnDepth(out, reason)
 
     def _paper_depth_to_thermal(self, depth: NDArray[np.uint16]) -> DepthOnThermal:
-        a_u, b_u, a_v, b_v = self._paper
+        # each thermal pixel reads the depth pixel the upscale puts on its centre
         d, t = self.calibration.depth, self.calibration.thermal
-        cols = np.rint((np.arange(t.width) - b_u) / a_u).astype(int)
-        rows = np.rint((np.arange(t.height) - b_v) / a_v).astype(int)
-        ok_c = (cols >= 0) & (cols < d.width)
-        ok_r = (rows >= 0) & (rows < d.height)
-        z = np.full(t.shape, np.nan, dtype=np.float32)
-        sub = depth[np.ix_(rows[ok_r], cols[ok_c])].astype(np.float32) * self._scale
-        z[np.ix_(ok_r, ok_c)] = np.where(sub > 0, sub, np.nan)
-        uu, vv = np.meshgrid(cols[ok_c], rows[ok_r])
-        x, y = d.normalized_from_pixels(np.stack([uu, vv], axis=-1))
-        rng = np.full(t.shape, np.nan, dtype=np.float32)
-        rng[np.ix_(ok_r, ok_c)] = z[np.ix_(ok_r, ok_c)] * np.sqrt(x * x + y * y + 1)
+        a_u, b_u, a_v, b_v = self._paper_affine
+        x, y = t.normalized_from_pixels(np.stack(t.pixel_grid(), axis=-1))
+        cols = np.rint((t.fx * x + t.cx - b_u) / a_u).astype(int)
+        rows = np.rint((t.fy * y + t.cy - b_v) / a_v).astype(int)
+        ok = (cols >= 0) & (cols < d.width) & (rows >= 0) & (rows < d.height)
+        units = np.zeros(t.shape, dtype=np.float32)
+        units[ok] = depth[rows[ok], cols[ok]]
+        ok &= units > 0
+        z = np.where(ok, units * self._scale, np.float32(np.nan)).astype(np.float32)
+        xd, yd = d.normalized_from_pixels(np.stack([cols, rows], axis=-1))
+        rng = (z * np.sqrt(xd * xd + yd * yd + 1)).astype(np.float32)
         return DepthOnThermal(z, rng)
 
 
@@ -426,21 +480,40 @@ def _ray_terms(cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray, Fl
         return a[0], a[1], a[2], np.ascontiguousarray(b, dtype=np.float32)
     u, v = d.pixel_grid()
     x, y = d.normalized_from_pixels(np.stack([u, v], axis=-1))
-    a = [np.ascontiguousarray(x * rot[i, 0] + y * rot[i, 1] + rot[i, 2], dtype=np.float32)
-         for i in range(3)]
+    a = [
+        np.ascontiguousarray(x * rot[i, 0] + y * rot[i, 1] + rot[i, 2], dtype=np.float32)
+        for i in range(3)
+    ]
     return a[0], a[1], a[2], np.zeros((d.height, 3), dtype=np.float32)
 
 
 def _fit_paper_map(cal: Calibration, distance_m: float) -> tuple[float, float, float, float]:
-    """The paper's crop/offset + upscale as u_t = a_u u_d + b_u, v_t = a_v v_d + b_v, fitted
-    (least squares) to the exact mapping of a plane at ``distance_m`` (section 2.2)."""
-    d = cal.depth
+    """The paper's crop/offset + upscale, u = a_u u_d + b_u, v = a_v v_d + b_v from depth
+    pixels to undistorted thermal pixels, fitted (least squares) to the exact mapping of a
+    plane at ``distance_m``."""
+    d, t = cal.depth, cal.thermal
     u, v = d.pixel_grid()
-    step = 8
-    uu, vv = u[::step, ::step], v[::step, ::step]
+    uu, vv = u[::8, ::8], v[::8, ::8]
     pts = cal.thermal_from_depth.apply(d.deproject(np.stack([uu, vv], -1), distance_m))
-    px = cal.thermal.project(pts)
-    ok = np.isfinite(px).all(axis=-1) & cal.thermal.contains(px)
-    a_u, b_u = np.polyfit(uu[ok], px[ok][:, 0], 1)
-    a_v, b_v = np.polyfit(vv[ok], px[ok][:, 1], 1)
+    x, y = pts[..., 0] / pts[..., 2], pts[..., 1] / pts[..., 2]
+    und_u, und_v = t.fx * x + t.cx, t.fy * y + t.cy
+    ok = t.contains(np.stack([und_u, und_v], axis=-1))
+    a_u, b_u = np.polyfit(uu[ok], und_u[ok], 1)
+    a_v, b_v = np.polyfit(vv[ok], und_v[ok], 1)
     return float(a_u), float(b_u), float(a_v), float(b_v)
+
+
+def _paper_sampling_maps(
+    cal: Calibration, affine: tuple[float, float, float, float]
+) -> tuple[FloatArray, FloatArray]:
+    """Raw thermal (u, v) sampled by each depth pixel: the affine map into the undistorted
+    thermal image, then the lens distortion (undistorting the image = sampling it there)."""
+    from .camera import distort
+
+    d, t = cal.depth, cal.thermal
+    a_u, b_u, a_v, b_v = affine
+    u, v = d.pixel_grid()
+    x = (a_u * u + b_u - t.cx) / t.fx
+    y = (a_v * v + b_v - t.cy) / t.fy
+    xd, yd = distort(x, y, t.distortion)
+    return ((t.fx * xd + t.cx).astype(np.float32), (t.fy * yd + t.cy).astype(np.float32))

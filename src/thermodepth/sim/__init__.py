@@ -18,6 +18,7 @@ from .scene import (
     occlusion_scene,
     plate_scene,
     target_scene,
+    wall_scene,
 )
 
 __all__ = [
@@ -39,5 +40,6 @@ __all__ = [
     "ramp_fpa",
     "steps_fpa",
     "target_scene",
+    "wall_scene",
     "warmup_fpa",
 ]

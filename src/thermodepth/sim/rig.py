@@ -38,8 +38,10 @@ def default_calibration() -> Calibration:
 
     Depth: 1280x720, fx = fy = 645, principal point at the centre, no distortion, 1 mm units.
     Thermal: 160x120, HFOV 56 deg (fx = 80 / tan 28 deg = 150.5), principal point ~1 px off
-    centre, mild barrel distortion. The Lepton sits 40 mm right of, 6 mm below and 3 mm
-    behind the depth origin, turned by about a degree: parallax at 0.5 m is ~12 thermal px.
+    centre, mild barrel distortion. The Lepton sits 40 mm left of, 6 mm below and 3 mm
+    behind the depth origin (the D435's right imager is on the other side, so the band the
+    Lepton cannot see behind near objects keeps valid depth), turned by about a degree:
+    parallax at 0.5 m is ~12 thermal px.
     """
     depth = Intrinsics(1280, 720, 645.0, 645.0, 639.5, 359.5)
     fx_t = 80.0 / np.tan(np.radians(28.0))
@@ -47,7 +49,7 @@ def default_calibration() -> Calibration:
         160, 120, fx_t, fx_t * 1.002, 80.6, 58.8, np.array([-0.08, 0.02, 0.0004, -0.0003, 0.0])
     )
     rot = rotation_from_euler(np.radians(0.4), np.radians(-0.6), np.radians(1.1))
-    centre_in_depth = np.array([0.040, 0.006, -0.003])
+    centre_in_depth = np.array([-0.040, 0.006, -0.003])
     t = RigidTransform(rot, -rot @ centre_in_depth, "thermal", "depth")
     return Calibration(depth, thermal, 0.001, t)
 

@@ -257,6 +257,27 @@ def plate_scene(
     return Scene(tuple(rects), ambient_temp_c + k, relative_humidity)
 
 
+def wall_scene(
+    distance_m: float,
+    temp_c: float = 25.0,
+    emissivity: float = 0.95,
+    ambient_temp_c: float = 25.0,
+    relative_humidity: float = 0.5,
+) -> Scene:
+    """A uniform wall facing the camera at ``distance_m`` (along +z), filling the view."""
+    k = ZERO_C_IN_K
+    wall = Rect(
+        np.array([0, 0, distance_m]),
+        np.array([1.0, 0, 0]),
+        np.array([0, 1.0, 0]),
+        50.0,
+        50.0,
+        Material(temp_c + k, emissivity, 0.5, "wall"),
+        name="wall",
+    )
+    return Scene((wall,), ambient_temp_c + k, relative_humidity)
+
+
 def occlusion_scene(
     box_temp_c: float = 60.0,
     box_distance_m: float = 0.8,
