@@ -300,6 +300,224 @@ def simulate_targets_cmd(
     console.print(f"wrote {len(caps.pairs)} pairs and {caps.calibration_path.name} to {out}")
 
 
+# -- compensation -----------------------------------------------------------------------------
+
+
+@app.command("fit-compensation")
+@one_line_errors
+def fit_compensation_cmd(
+    sweep: Annotated[Path | None, typer.Argument(help="Sweep CSV (see README).")] = None,
+    out: Annotated[Path, typer.Option("-o", "--out", help="Model JSON to write.")] = Path(
+        "model.json"
+    ),
+    method: Annotated[str, typer.Option(help="radiance (ours, default) or paper.")] = "radiance",
+    preset: Annotated[
+        str | None,
+        typer.Option(help="Write a published model instead of fitting: paper2022 (eq. 20)."),
+    ] = None,
+    reference_temp: Annotated[
+        float | None,
+        typer.Option(
+            help="paper: the reference temperature (C) to fit at (default 39 if present)."
+        ),
+    ] = None,
+    ambient_c: Annotated[
+        float, typer.Option(help="Air temperature (C) for rows without ambient_temp_c.")
+    ] = 25.0,
+    humidity_pct: Annotated[
+        float, typer.Option(help="Relative humidity (%) for rows without humidity_pct.")
+    ] = 50.0,
+    emissivity: Annotated[
+        float, typer.Option(help="Emissivity for rows without emissivity.")
+    ] = 0.95,
+) -> None:
+    """Fit a distance + VOx compensation model on a sweep (or write a published preset)."""
+    from .compensation import save_model
+
+    model = fit_compensation(
+        sweep, method, preset, reference_temp, ambient_c, humidity_pct, emissivity
+    )
+    save_model(model, out)
+    console.print(f"wrote {model.method} model to {out}")
+    if model.method == "radiance":
+        console.print(f"  degrees chosen by cross-validation: {model.cv.get('degrees')}")
+
+
+def fit_compensation(
+    sweep: Path | None,
+    method: str = "radiance",
+    preset: str | None = None,
+    reference_temp: float | None = None,
+    ambient_c: float = 25.0,
+    humidity_pct: float = 50.0,
+    emissivity: float = 0.95,
+) -> Any:
+    """A fitted (or preset) compensation model; bad input raises InputError."""
+    from .compensation import PRESETS, Conditions, fit
+    from .sweep import read_sweep_csv
+
+    if preset is not None:
+        if preset not in PRESETS:
+            raise InputError(f"--preset: unknown {preset!r}; choose from {sorted(PRESETS)}")
+        return PRESETS[preset]()
+    if sweep is None:
+        raise InputError("give a sweep CSV to fit, or --preset")
+    if not (0 < emissivity <= 1 and 0 <= humidity_pct <= 100):
+        raise InputError("--emissivity must be in (0, 1] and --humidity-pct in [0, 100]")
+    table = read_sweep_csv(sweep)
+    if method == "paper":
+        return fit(table, "paper", reference_temp_c=reference_temp)
+    return fit(table, method, conditions=Conditions(ambient_c, humidity_pct, emissivity))
+
+
+@app.command("compensate")
+@one_line_errors
+def compensate_cmd(
+    model: Annotated[Path, typer.Argument(help="Model JSON (fit-compensation).")],
+    readings: Annotated[
+        Path,
+        typer.Argument(
+            help="Readings CSV: distance_m, vox_temp_c, measured_temp_c (+ optional columns)."
+        ),
+    ],
+    out: Annotated[Path, typer.Option("-o", "--out", help="CSV to write.")],
+) -> None:
+    """Add compensated_temp_c and flag columns to a readings CSV."""
+    n, flagged = compensate_file(model, readings, out)
+    console.print(f"wrote {n} rows to {out} ({flagged} flagged)")
+
+
+def compensate_file(model_path: Path, readings: Path, out: Path) -> tuple[int, int]:
+    """Compensate every row of ``readings`` into ``out``; returns (rows, rows flagged)."""
+    from .compensation import apply_to_table, flag_names, load_model
+    from .sweep import read_sweep_csv, write_sweep_csv
+
+    model = load_model(model_path)
+    table = read_sweep_csv(readings, required=("distance_m", "vox_temp_c", "measured_temp_c"))
+    result = apply_to_table(model, table)
+    flags = flag_names(result.flag)
+    write_sweep_csv(out, table.with_columns(compensated_temp_c=result.temp_c, flag=flags))
+    return len(table), sum(f != "ok" for f in flags)
+
+
+@app.command("evaluate")
+@one_line_errors
+def evaluate_cmd(
+    model: Annotated[Path, typer.Argument(help="Model JSON (fit-compensation).")],
+    test: Annotated[Path, typer.Argument(help="Test sweep CSV with reference_temp_c.")],
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object on stdout.")] = False,
+    by_vox: Annotated[
+        bool, typer.Option("--by-vox", help="Also the layout of the paper's Tables 1-5.")
+    ] = False,
+    plot: Annotated[Path | None, typer.Option(help="Write Figs. 13 and 14 (PNG) here.")] = None,
+) -> None:
+    """Score a model on a test sweep: the paper's Table 6 metric and RMSE, max |error|, SD."""
+    from .compensation import evaluation_report, load_model
+    from .sweep import read_sweep_csv
+
+    m = load_model(model)
+    table = read_sweep_csv(test)
+    report = evaluation_report(m, table, 1.0 if by_vox else None)
+    if plot is not None:
+        from .figures import plot_vox_curves
+
+        report["figures"] = [str(p) for p in plot_vox_curves(m, table, plot)]
+    if as_json:
+        print(json.dumps(report, indent=2))
+        return
+    print_scores(f"{test}: {m.method} model", report["per_distance"], report["overall"])
+    if report["flags"] != {"ok": len(table)}:
+        console.print(f"flags: {report['flags']}")
+    for block in report.get("by_vox", []):
+        print_by_vox(block)
+    for path in report.get("figures", []):
+        console.print(f"wrote {path}")
+
+
+def print_scores(title: str, rows: list[dict[str, Any]], total: dict[str, Any]) -> None:
+    table = Table(title=title)
+    for col in (
+        "target C",
+        "distance m",
+        "n",
+        "mean C",
+        "error of mean %",
+        "RMSE C",
+        "max |error| C",
+        "SD C",
+    ):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(
+            f"{r['reference_temp_c']:g}",
+            f"{r['distance_m']:g}",
+            str(r["n"]),
+            f"{r['mean_c']:.3f}",
+            f"{r['error_of_mean_pct']:.3f}",
+            f"{r['rmse_c']:.3f}",
+            f"{r['max_abs_error_c']:.3f}",
+            f"{r['sd_c']:.3f}",
+        )
+    console.print(table)
+    console.print(
+        f"all {total['n']} readings: RMSE {total['rmse_c']:.3f} C, max |error| "
+        f"{total['max_abs_error_c']:.3f} C, mean error {total['mean_error_c']:+.3f} C"
+    )
+
+
+def print_by_vox(block: dict[str, Any]) -> None:
+    cells = block["mean_c_by_vox"]
+    table = Table(
+        title=f"{block['reference_temp_c']:g} C target at {block['distance_m']:g} m: "
+        "mean compensated reading per VOx temperature (Tables 1-5)"
+    )
+    for k in cells:
+        table.add_column(k, justify="right")
+    table.add_row(*(f"{v:.3f}" for v in cells.values()))
+    console.print(table)
+
+
+@app.command("paper-tables")
+@one_line_errors
+def paper_tables_cmd(
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object on stdout.")] = False,
+) -> None:
+    """The paper's Tables 1-5 recomputed into Table 6, with the figures the paper omits."""
+    from .compensation import paper_tables_report
+
+    report = paper_tables_report()
+    if as_json:
+        print(json.dumps(report, indent=2))
+        return
+    table = Table(title="Lin & Yao 2022, Table 6: published vs recomputed from Tables 1-5")
+    for col in (
+        "distance m",
+        "published avg C",
+        "published error %",
+        "recomputed avg C",
+        "recomputed error %",
+        "max |error| C",
+        "SD C",
+    ):
+        table.add_column(col, justify="right")
+    for pub, rec in zip(report["published"], report["recomputed"], strict=True):
+        table.add_row(
+            f"{pub['distance_m']:g}",
+            f"{pub['average_c']:.3f}",
+            f"{pub['error_pct']:.3f}",
+            f"{rec['mean_c']:.3f}",
+            f"{rec['error_of_mean_pct']:.3f}",
+            f"{rec['max_abs_error_c']:.3f}",
+            f"{rec['sd_c']:.3f}",
+        )
+    console.print(table)
+    o = report["overall"]
+    console.print(
+        f"what the paper does not show: single readings are off by up to "
+        f"{o['max_abs_error_c']:.2f} C (RMSE {o['rmse_c']:.3f} C over {o['n']})"
+    )
+
+
 def main() -> None:
     """Console-script entry point."""
     app()

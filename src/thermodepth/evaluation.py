@@ -6,13 +6,21 @@ Lives below ``registration`` and ``sim`` in the house: it may import both.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from .camera import RigidTransform
+from .compensation import (
+    CompensationModel,
+    PaperModel,
+    RadianceModel,
+    apply_to_table,
+    overall,
+)
 from .registration import REGISTRATION_METHODS, Reason, Registration
 from .sim import DepthCameraModel, Rig, wall_scene
+from .sim.protocols import SweepConfig, simulate_sweep
+from .sweep import SweepTable
 
 
 @dataclass(frozen=True)
@@ -83,41 +91,58 @@ def registration_error_table(
     return [registration_error(d, m) for m in methods for d in distances_m]
 
 
-def plot_registration_error(rows: list[RegistrationError], path: str | Path) -> Path:
-    """Median and 95th-percentile error (thermal px) vs distance per method, as a PNG."""
-    import matplotlib
+# -- compensation: does it generalise? -------------------------------------------------------
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+TRAIN_DISTANCES_M = (0.5, 1.0, 1.5, 2.0, 2.5)
+TRAIN_TEMPS_C = (35.0, 39.0, 50.0)
+TRAIN_VOX_STEPS_C = (25.0, 28.0, 31.0, 34.0, 37.0, 40.0)
 
-    floor = 1e-3  # errors below it (exact depth quanta) are drawn on it: log axis
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    for method in sorted({r.method for r in rows}):
-        sel = [r for r in rows if r.method == method]
-        d = [r.distance_m for r in sel]
-        med = [max(r.median_px, floor) for r in sel]
-        line = ax.plot(d, med, "o-", label=f"{method}: median")[0]
-        ax.plot(
-            d,
-            [max(r.p95_px, floor) for r in sel],
-            "--",
-            color=line.get_color(),
-            label=f"{method}: 95th percentile",
-        )
-    ax.set_ylim(floor / 2, None)
-    ax.set_yscale("log")
-    ax.set_xlabel("distance to the wall (m)")
-    ax.set_ylabel("registration error (thermal pixels)")
-    ax.set_title(
-        "Depth -> thermal correspondence error vs ground truth\n"
-        "(errors below 0.001 px drawn at 0.001)",
-        fontsize=10,
-    )
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+
+@dataclass(frozen=True, eq=False)
+class Generalisation:
+    """Both methods fitted on one simulated sweep and scored on sweeps they never saw.
+
+    train: distances 0.5-2.5 m, plates at 35, 39 and 50 C, VOx held at 25, 28, ..., 40 C;
+    ours ("radiance") is fitted on all of it, the paper's method on the 39 C rows only (as
+    the paper). tests: held-out distances (0.75, 1.25, 2.25, 3.0 m), held-out targets (45,
+    60, 80 C), and VOx between and beyond the fitted steps (a 22 -> 43 C ramp).
+    """
+
+    train: SweepTable
+    tests: dict[str, SweepTable]
+    models: dict[str, CompensationModel]
+
+    def table(self) -> list[dict[str, object]]:
+        """RMSE, max |error| and mean error (C) per test set and method."""
+        rows: list[dict[str, object]] = []
+        for name, tab in self.tests.items():
+            for method, model in self.models.items():
+                o = overall(apply_to_table(model, tab).temp_c, tab)
+                rows.append({"test": name, "method": method, **o})
+        return rows
+
+
+def compensation_generalisation(samples: int = 600, seed: int = 0) -> Generalisation:
+    """Simulate the training and held-out sweeps (``samples`` frames per distance and
+    target) and fit both methods; see :class:`Generalisation`."""
+
+    def sweep(i: int, **kw: object) -> SweepTable:
+        base = {
+            "distances_m": TRAIN_DISTANCES_M,
+            "plate_temps_c": TRAIN_TEMPS_C,
+            "samples": samples,
+            "seed": seed * 10 + i,
+        }
+        return simulate_sweep(SweepConfig(**{**base, **kw}))  # type: ignore[arg-type]
+
+    train = sweep(0, vox_steps_c=TRAIN_VOX_STEPS_C)
+    tests = {
+        "held-out distances": sweep(1, distances_m=(0.75, 1.25, 2.25, 3.0)),
+        "held-out targets": sweep(2, plate_temps_c=(45.0, 60.0, 80.0)),
+        "VOx between/beyond": sweep(3, vox_min_c=22.0, vox_max_c=43.0),
+    }
+    models: dict[str, CompensationModel] = {
+        "radiance": RadianceModel.fit(train),
+        "paper": PaperModel.fit(train, reference_temp_c=39.0),
+    }
+    return Generalisation(train, tests, models)

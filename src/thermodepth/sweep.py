@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,13 +47,24 @@ COLUMNS = REQUIRED + OPTIONAL
 class SweepTable:
     """Numeric columns as float arrays of equal length, plus any other columns as text.
 
-    ``source`` names the file in messages; ``lines`` holds each row's line number in it.
+    ``source`` names the file in messages; ``lines`` holds each row's line number in it;
+    ``order`` the column order to write (a read file's header, then added columns).
     """
 
     columns: dict[str, FloatArray]
     extra: dict[str, list[str]] = field(default_factory=dict)
     source: str = "<sweep>"
     lines: NDArray[np.int64] | None = None
+    order: list[str] = field(default_factory=list)
+
+    @property
+    def names(self) -> list[str]:
+        """Every column: ``order`` first, then the known columns in their documented order,
+        then the rest."""
+        present = [*self.columns, *self.extra]
+        known = [c for c in COLUMNS if c in present and c not in self.order]
+        rest = [c for c in present if c not in self.order and c not in known]
+        return [c for c in self.order if c in present] + known + rest
 
     def __len__(self) -> int:
         return len(next(iter(self.columns.values()))) if self.columns else 0
@@ -76,6 +87,7 @@ class SweepTable:
             {k: [v[i] for i in idx] for k, v in self.extra.items()},
             self.source,
             None if self.lines is None else self.lines[idx],
+            self.order,
         )
 
     def with_columns(self, **cols: FloatArray | Sequence[str]) -> SweepTable:
@@ -89,15 +101,7 @@ class SweepTable:
             else:
                 txt[k] = [str(x) for x in v]
                 num.pop(k, None)
-        return SweepTable(num, txt, self.source, self.lines)
-
-    @classmethod
-    def from_rows(cls, rows: Iterable[Mapping[str, float]], source: str = "<sweep>") -> SweepTable:
-        rows = list(rows)
-        names = list(rows[0]) if rows else list(REQUIRED)
-        return cls(
-            {k: np.array([r[k] for r in rows], dtype=np.float64) for k in names}, source=source
-        )
+        return SweepTable(num, txt, self.source, self.lines, self.names + list(cols))
 
 
 def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> SweepTable:
@@ -142,7 +146,11 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     if not lines:
         raise InputError(f"{p}: no data rows after the header")
     return SweepTable(
-        {k: np.array(v) for k, v in values.items()}, extra, str(p), np.array(lines, dtype=np.int64)
+        {k: np.array(v) for k, v in values.items()},
+        extra,
+        str(p),
+        np.array(lines, dtype=np.int64),
+        header,
     )
 
 
@@ -157,12 +165,10 @@ def _number(cell: str, path: Path, line: int, column: str) -> float:
 
 
 def write_sweep_csv(path: str | Path, table: SweepTable, digits: int = 6) -> None:
-    """Write a sweep table: known columns first in their documented order, then the rest."""
+    """Write a sweep table, columns in :attr:`SweepTable.names` order."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    known = [c for c in COLUMNS if c in table.columns]
-    rest = [c for c in table.columns if c not in COLUMNS] + list(table.extra)
-    names = known + rest
+    names = table.names
     cols: list[Sequence[object]] = []
     for name in names:
         if name in table.columns:

@@ -16,7 +16,7 @@ from ..calibration import BoardSpec, Calibration
 from ..camera import RigidTransform, rotation_from_euler
 from ..radiometry import ZERO_C_IN_K, ObjectParams, RadiometryParams, raw_to_celsius
 from ..sweep import SweepTable
-from .lepton import LeptonModel, LeptonSensor, ramp_fpa
+from .lepton import FpaProfile, LeptonModel, LeptonSensor, ramp_fpa, steps_fpa
 from .rig import Rig, default_calibration
 from .scene import Scene, board_pattern, camera_pose, plate_scene, target_scene
 
@@ -30,7 +30,9 @@ class SweepConfig:
     distances while the sensor's VOx temperature moves across a range.
 
     distances_m, plate_temps_c: the grid; vox_min_c / vox_max_c: FPA range, swept by a
-    linear ramp over the samples (as a camera warming up); samples: readings per distance and
+    linear ramp over the samples (as a camera warming up), or vox_steps_c: FPA held at each
+    of these temperatures in turn for an equal share of the samples; samples: readings per
+    distance and
     plate temperature (the paper takes 6000); roi_half_px: ROI of (2 h + 1)^2 thermal pixels
     at the plate centre; emissivity: used by the radiometry of measured_temp_c.
     """
@@ -45,6 +47,18 @@ class SweepConfig:
     emissivity: float = 0.95
     roi_half_px: int = 2
     seed: int = 0
+    vox_steps_c: tuple[float, ...] | None = None
+
+    def fpa_profile(self, fps: float) -> FpaProfile:
+        """FPA temperature (K) over the ``samples`` frames of one distance."""
+        duration_s = self.samples / fps
+        k = ZERO_C_IN_K
+        if self.vox_steps_c:
+            n = len(self.vox_steps_c)
+            return steps_fpa(
+                [i * duration_s / n for i in range(n)], [t + k for t in self.vox_steps_c]
+            )
+        return ramp_fpa(self.vox_min_c + k, self.vox_max_c + k, duration_s)
 
 
 def plate_roi(rig: Rig, half: int) -> tuple[slice, slice]:
@@ -81,7 +95,6 @@ def simulate_sweep(
             relative_humidity=rh,
         ),
     )
-    duration_s = config.samples / lepton.fps
     rows: dict[str, list[float]] = {
         c: []
         for c in (
@@ -104,8 +117,7 @@ def simulate_sweep(
         for d in config.distances_m:
             rig = Rig(scene, camera_pose(d), lepton=lepton)
             roi = rig.aperture[plate_roi(rig, config.roi_half_px)]
-            fpa = ramp_fpa(config.vox_min_c + k, config.vox_max_c + k, duration_s)
-            sensor = LeptonSensor(lepton, roi.shape, fpa, rng)
+            sensor = LeptonSensor(lepton, roi.shape, config.fpa_profile(lepton.fps), rng)
             for i in range(config.samples):
                 counts, tel = sensor.read(i / lepton.fps, roi)
                 if tel.in_ffc:

@@ -1,0 +1,119 @@
+"""Figures (matplotlib, PNG): registration error, the paper's Figs. 13 and 14."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .compensation import CompensationModel, PaperModel, apply_to_table
+from .sweep import SweepTable
+
+if TYPE_CHECKING:
+    from .evaluation import RegistrationError
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig: Any, path: str | Path) -> Path:
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    _pyplot().close(fig)
+    return out
+
+
+def plot_registration_error(rows: list[RegistrationError], path: str | Path) -> Path:
+    """Median and 95th-percentile error (thermal px) vs distance per method, as a PNG."""
+    plt = _pyplot()
+    floor = 1e-3  # errors below it (exact depth quanta) are drawn on it: log axis
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    for method in sorted({r.method for r in rows}):
+        sel = [r for r in rows if r.method == method]
+        d = [r.distance_m for r in sel]
+        med = [max(r.median_px, floor) for r in sel]
+        line = ax.plot(d, med, "o-", label=f"{method}: median")[0]
+        ax.plot(
+            d,
+            [max(r.p95_px, floor) for r in sel],
+            "--",
+            color=line.get_color(),
+            label=f"{method}: 95th percentile",
+        )
+    ax.set_ylim(floor / 2, None)
+    ax.set_yscale("log")
+    ax.set_xlabel("distance to the wall (m)")
+    ax.set_ylabel("registration error (thermal pixels)")
+    ax.set_title(
+        "Depth -> thermal correspondence error vs ground truth\n"
+        "(errors below 0.001 px drawn at 0.001)",
+        fontsize=10,
+    )
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def _vox_bins(
+    table: SweepTable, values: np.ndarray, step_c: float = 1.0
+) -> dict[tuple[float, float], tuple[np.ndarray, np.ndarray]]:
+    """Mean of ``values`` per (reference, distance) and VOx bin: x and y arrays."""
+    out = {}
+    vox_bin = np.round(table["vox_temp_c"] / step_c) * step_c
+    for r in np.unique(table["reference_temp_c"]):
+        for d in np.unique(table["distance_m"][table["reference_temp_c"] == r]):
+            sel = (
+                (table["reference_temp_c"] == r) & (table["distance_m"] == d) & np.isfinite(values)
+            )
+            bins = np.unique(vox_bin[sel])
+            out[(float(r), float(d))] = (
+                bins,
+                np.array([values[sel][vox_bin[sel] == b].mean() for b in bins]),
+            )
+    return out
+
+
+def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | Path) -> list[Path]:
+    """The paper's Fig. 13 (uncompensated readings vs VOx temperature per distance, with the
+    model's curves) and Fig. 14 (compensated readings), one panel per target temperature.
+    Points are means per 1 C of VOx. Returns the two PNG paths."""
+    plt = _pyplot()
+    refs = np.unique(table["reference_temp_c"])
+    compensated = apply_to_table(model, table).temp_c
+    paths = []
+    for name, values, title in (
+        ("fig13_uncompensated.png", table["measured_temp_c"], "uncompensated (Fig. 13)"),
+        ("fig14_compensated.png", compensated, f"compensated, {model.method} (Fig. 14)"),
+    ):
+        fig, axes = plt.subplots(1, refs.size, figsize=(5.2 * refs.size, 4.0), squeeze=False)
+        bins = _vox_bins(table, values)
+        for ax, r in zip(axes[0], refs, strict=True):
+            dists = sorted(d for (rr, d) in bins if rr == r)
+            colors = plt.cm.viridis(np.linspace(0, 0.9, len(dists)))
+            for d, color in zip(dists, colors, strict=True):
+                x, y = bins[(float(r), d)]
+                ax.plot(x, y, "o", ms=3, color=color, label=f"{d:g} m")
+                if name.startswith("fig13"):
+                    xs = np.linspace(x.min(), x.max(), 100)
+                    if isinstance(model, PaperModel):
+                        if d in model.distances_m and np.isclose(r, model.reference_temp_c):
+                            ax.plot(xs, model.curve(xs, d), "-", color=color, lw=1)
+                    else:
+                        ax.plot(xs, model.predict_measured(r, xs, d), "-", color=color, lw=1)
+            ax.axhline(r, color="k", lw=0.8, ls=":")
+            ax.set_xlabel("VOx (sensor) temperature (C)")
+            ax.set_ylabel("reading (C)")
+            ax.set_title(f"{r:g} C target, {title}", fontsize=10)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7, ncol=2)
+        paths.append(_save(fig, Path(out_dir) / name))
+    return paths
