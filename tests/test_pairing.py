@@ -37,7 +37,7 @@ def test_pairs_at_the_rigs_rates() -> None:
 
 def test_gap_in_depth_drops_thermal_frames() -> None:
     depth = np.concatenate([np.arange(0, 1, 1 / 30), np.arange(2, 3, 1 / 30)])
-    thermal = np.arange(0, 3, 1 / 8.7)
+    thermal = np.arange(0, 2.95, 1 / 8.7)
     pairs, stats = pair_times(depth, thermal, max_skew_s=0.020)
     last_before, first_after = depth[depth < 1.5].max(), depth[depth > 1.5].min()
     in_gap = int(np.sum((thermal > last_before + 0.020) & (thermal < first_after - 0.020)))
