@@ -75,8 +75,9 @@ def online(
         out += pairer.add_thermal(ThermalFrame(EMPTY_D, thermal[ti], ti, TELEM))
         ti += 1
     out += pairer.flush()
-    assert [p.index for p in out] == list(range(len(out)))
-    return [(round(p.depth_time_s * 1e6), round(p.thermal_time_s * 1e6)) for p in out], (
+    assert [m.pair.index for m in out] == list(range(len(out)))
+    assert all(m.pair.depth is m.depth.depth for m in out)
+    return [(round(m.depth.time_s * 1e6), round(m.thermal.time_s * 1e6)) for m in out], (
         pairer.stats.dropped
     )
 

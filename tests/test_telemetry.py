@@ -222,7 +222,10 @@ def test_split_frame(location: str) -> None:
 @pytest.mark.parametrize(
     ("frame", "message"),
     [
-        (np.zeros((120, 160), np.uint16), "expected 160x122 Y16 (160x120 image + 2 telemetry rows), got 160x120"),
+        (
+            np.zeros((120, 160), np.uint16),
+            "expected 160x122 Y16 (160x120 image + 2 telemetry rows), got 160x120",
+        ),
         (np.zeros((122, 160, 3), np.uint8), "got shape (122, 160, 3)"),
         (np.zeros((122, 160), np.uint8), "expected 16-bit Y16 pixels (uint16), got uint8"),
     ],

@@ -118,3 +118,17 @@ def pair_of(depth: DepthFrame, thermal: ThermalFrame, index: int) -> FramePair:
         index,
         depth.ir,
     )
+
+
+@dataclass(frozen=True, eq=False)
+class Match:
+    """A pair and the two stream frames it was made of (what recorders store: the frames
+    once, the pair as a reference to them)."""
+
+    depth: DepthFrame
+    thermal: ThermalFrame
+    pair: FramePair
+
+
+StreamEvent = DepthFrame | ThermalFrame | Match
+"""What a source emits, in order: stream frames as they arrive and pairs as they form."""

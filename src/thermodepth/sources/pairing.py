@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..frames import DepthFrame, FramePair, ThermalFrame, pair_of
+from ..frames import DepthFrame, Match, ThermalFrame, pair_of
 
 DEFAULT_MAX_SKEW_S = 0.020
 
@@ -101,7 +101,8 @@ class StreamPairer:
     """Online pairing of a depth stream and a thermal stream, frames arriving in any
     interleaving (each stream in time order).
 
-    ``add_depth`` / ``add_thermal`` return the pairs they complete; ``flush()`` decides what
+    ``add_depth`` / ``add_thermal`` return the pairs they complete (as :class:`Match`: the
+    pair and the frames it was made of), numbered from 0; ``flush()`` decides what
     is still waiting at the end. A thermal frame at time t is decided once a depth frame at
     or after t has arrived (its nearest depth frame is then known). Depth frames that can no
     longer be the nearest to any thermal frame to come (older than the last depth frame at or
@@ -120,23 +121,23 @@ class StreamPairer:
         self._next_index = 0
         self._last_thermal_s = float("-inf")
 
-    def add_depth(self, frame: DepthFrame) -> list[FramePair]:
+    def add_depth(self, frame: DepthFrame) -> list[Match]:
         self.stats.depth_frames += 1
         self._depth.append(frame)
         return self._decide(final=False)
 
-    def add_thermal(self, frame: ThermalFrame) -> list[FramePair]:
+    def add_thermal(self, frame: ThermalFrame) -> list[Match]:
         self.stats.thermal_frames += 1
         self._last_thermal_s = frame.time_s
         self._waiting.append(frame)
         return self._decide(final=False)
 
-    def flush(self) -> list[FramePair]:
+    def flush(self) -> list[Match]:
         """Decide every waiting thermal frame with the depth frames seen so far."""
         return self._decide(final=True)
 
-    def _decide(self, final: bool) -> list[FramePair]:
-        out: list[FramePair] = []
+    def _decide(self, final: bool) -> list[Match]:
+        out: list[Match] = []
         while self._waiting:
             th = self._waiting[0]
             if not final and (not self._depth or self._depth[-1].time_s < th.time_s):
@@ -145,7 +146,8 @@ class StreamPairer:
             times = np.fromiter((f.time_s for f in self._depth), np.float64, len(self._depth))
             j = nearest_index(times, th.time_s)
             if j >= 0 and abs(times[j] - th.time_s) <= self.max_skew_s:
-                out.append(pair_of(self._depth[j], th, self._next_index))
+                d = self._depth[j]
+                out.append(Match(d, th, pair_of(d, th, self._next_index)))
                 self._next_index += 1
                 self.stats.add_pair(float(times[j] - th.time_s))
             else:
