@@ -12,11 +12,12 @@ Layout (docs/recording.md has the full description)::
       pairs         (N, 3)    int64    depth row, thermal row, pair index (-1 = none)
 
 Crash safety: a frame's image chunks are written before its meta row, and a pair row only
-after both its frames; every chunk is its own file, written by zarr (>= 3.1) to a temporary
-file and renamed into place, so a SIGKILL leaves each chunk either whole or absent. A frame
-counts only when its meta row is there (not NaN) and its pixels match the CRC-32 the row
-holds; arrays grow in blocks (their shape may run ahead of the frames), and the true counts
-are found on open. So a killed recording loses at most the frames in flight. A corrupt or
+after both its frames; every chunk is its own file, which zarr (>= 3.1.3, zarr-python PR 3412)
+writes to a temporary file and renames into place, so a SIGKILL leaves each file either whole
+or absent (a torn chunk from another writer would fail its checksums). A frame counts only
+when its meta row is there (not NaN) and its pixels match the CRC-32 the row holds; arrays
+grow by doubling (their shape may run ahead of the frames), and the true counts are found on
+open. So a killed recording loses at most the frames in flight. A corrupt or
 missing chunk costs its frame only: it is skipped with one warning line and counted.
 
 Compression: Blosc with zstd (level 1, byte shuffle) then a CRC-32C checksum codec per chunk.
