@@ -76,10 +76,13 @@ def _describe(profile: Any) -> str:
     return f"{profile.stream_name()} {vp.width()}x{vp.height()} {str(profile.format()).split('.')[-1].upper()} at {profile.fps()} fps"  # noqa: E501
 
 
-def depth_time_s(rs: Any, frame: Any) -> float:
-    """A frame's capture time in seconds on the host clock where librealsense gives one."""
+def depth_time_s(rs: Any, frame: Any, live: bool = True) -> float:
+    """A frame's capture time in seconds: its timestamp (ms) when it is on the host clock
+    (global or system time) or comes from a file (replayed as recorded); for a live frame on
+    the device's hardware clock, the host time now (it cannot be paired otherwise)."""
     domain = frame.get_frame_timestamp_domain()
-    if domain in (rs.timestamp_domain.global_time, rs.timestamp_domain.system_time):
+    host = (rs.timestamp_domain.global_time, rs.timestamp_domain.system_time)
+    if not live or domain in host:
         return float(frame.get_timestamp()) / 1000.0
     return time.time()
 
@@ -142,6 +145,12 @@ class RealSenseCamera:
             self.with_ir = with_ir and any(s.stream_type() == rs.stream.infrared for s in streams)
             self.serial = profile.get_device().get_info(rs.camera_info.serial_number)
         else:
+            attached = list_realsense()
+            if not attached:
+                raise InputError("no RealSense device found (is it plugged in?)")
+            if serial and serial not in [d["serial"] for d in attached]:
+                there = ", ".join(f"{d['name']} {d['serial']}" for d in attached)
+                raise InputError(f"no RealSense device with serial {serial} (found: {there})")
             if serial:
                 config.enable_device(serial)
             config.enable_stream(rs.stream.depth, w, h, rs.format.z16, fps)
@@ -150,9 +159,6 @@ class RealSenseCamera:
             try:
                 profile = self.pipeline.start(config)
             except RuntimeError as exc:
-                attached = list_realsense()
-                if not attached:
-                    raise InputError("no RealSense device found (is it plugged in?)") from None
                 raise InputError(
                     f"RealSense {serial or attached[0]['serial']}: cannot stream depth {w}x{h} Z16 "
                     f"at {fps} fps{' + IR Y8' if with_ir else ''} ({exc}); expected a D435-class "
@@ -176,6 +182,8 @@ class RealSenseCamera:
         rs = self.rs
         last = -1
         timeout_ms = int(self.timeout_s * 1000)
+        if not self.live:  # poll, so that the end of a file is noticed at once
+            timeout_ms = 100
         while not self._closed:
             try:
                 ok, frames = self.pipeline.try_wait_for_frames(timeout_ms)
@@ -188,7 +196,9 @@ class RealSenseCamera:
                     raise DeviceLostError(
                         f"{self.name}: no frame for {self.timeout_s:g} s (unplugged?)"
                     )
-                return  # end of the file
+                if self._playback.current_status() == self.rs.playback_status.stopped:
+                    return  # end of the file
+                continue
             depth = frames.get_depth_frame()
             if not depth:
                 continue
@@ -203,7 +213,7 @@ class RealSenseCamera:
                     ir = np.array(np.asanyarray(irf.get_data()), dtype=np.uint8, copy=True)
             yield DepthFrame(
                 np.array(np.asanyarray(depth.get_data()), dtype=np.uint16, copy=True),
-                depth_time_s(rs, depth),
+                depth_time_s(rs, depth, self.live),
                 number,
                 ir,
             )
