@@ -192,7 +192,9 @@ class RealSenseCamera:
                     return
                 raise DeviceLostError(f"{self.name}: stopped delivering frames ({exc})") from None
             if not ok:
-                if self.live and not self._closed:
+                if self._closed:
+                    return
+                if self.live:
                     raise DeviceLostError(
                         f"{self.name}: no frame for {self.timeout_s:g} s (unplugged?)"
                     )
