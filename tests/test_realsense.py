@@ -5,6 +5,7 @@ by pyrealsense2's own recorder, then played back through our source and compared
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -100,8 +101,6 @@ def write_realsense_file(
     for _ in range(200):  # the recorder writes from its callback thread
         if len(arrived) >= expected:
             break
-        import time
-
         time.sleep(0.01)
     rsensor.stop()
     rsensor.close()

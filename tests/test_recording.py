@@ -186,7 +186,7 @@ def test_sigkill_mid_write_keeps_every_completed_frame(tmp_path: Path) -> None:
     assert proc.returncode == -signal.SIGKILL
     rec = Recording(out)
     assert not rec.complete
-    assert rec.n_pairs >= 6
+    assert rec.n_pairs >= 5  # the 6th pair's folder may be there before its file
     assert rec.n_depth >= rec.n_pairs and rec.n_thermal >= rec.n_pairs
     got = list(rec.pairs())
     assert len(got) == rec.n_pairs and rec.skipped == 0

@@ -188,8 +188,8 @@ def parse_floats(text: str, option: str) -> list[float]:
 
 
 @contextmanager
-def progress_bar(description: str, total: int) -> Iterator[Callable[[int], None]]:
-    """A rich progress bar; yields ``advance(n)``."""
+def progress_bar(description: str, total: int | None) -> Iterator[Callable[[int], None]]:
+    """A rich progress bar (``total`` None: no known end); yields ``advance(n)``."""
     with Progress(
         SpinnerColumn(),
         TextColumn("{task.description}"),
@@ -370,7 +370,10 @@ def record_cmd(
     ] = None,
     calibration: Annotated[
         Path | None,
-        typer.Option(help="Calibration file (thermal intrinsics, extrinsics) to store."),
+        typer.Option(
+            help="Calibration file (thermal intrinsics, extrinsics) to store; a RealSense's "
+            "own depth intrinsics replace its depth section (sim and recordings keep theirs)."
+        ),
     ] = None,
     max_skew_ms: Annotated[
         float, typer.Option(help="Pairing: drop pairs further apart in time, ms.")
@@ -393,7 +396,7 @@ def record_cmd(
         raise InputError("--max-skew-ms: must be >= 0")
     cal = Calibration.load(calibration) if calibration else None
     src = open_source(source, cal, max_skew_s=max_skew_ms / 1000.0, with_ir=ir, warn=_warn_line)
-    with progress_bar(f"recording {src.name}", frames or 0) as advance:
+    with progress_bar(f"recording {src.name}", frames) as advance:
         result = record_session(
             src,
             out,
