@@ -191,7 +191,8 @@ def test_lepton_without_telemetry_rows_says_what_was_expected(
     with pytest.raises(
         InputError,
         match=re.escape(
-            "Lepton frame: expected 160x122 Y16 (160x120 image + 2 telemetry rows), got 160x120"
+            "Lepton frame: expected 160x122 Y16 (160x120 image + 2 telemetry rows), got "
+            "160x120 (no telemetry rows: enable the Lepton's telemetry)"
         ),
     ):
         next(iter(cam))

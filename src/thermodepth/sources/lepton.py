@@ -127,6 +127,8 @@ class LeptonCamera:
             raise InputError(f"/dev/video{index}: cannot open (no such device, or busy)")
         self.cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter.fourcc(*"Y16 "))
         self.cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
+        self.cap.set(cv2.CAP_PROP_FRAME_WIDTH, FRAME_SHAPE[1])
+        self.cap.set(cv2.CAP_PROP_FRAME_HEIGHT, FRAME_SHAPE[0])
         self.settings = {"device": f"/dev/video{index}", "telemetry_location": location}
         self._closed = False
 

@@ -178,8 +178,14 @@ def split_frame(
     if arr.shape != FRAME_SHAPE:
         h, w = FRAME_SHAPE
         got = f"{arr.shape[1]}x{arr.shape[0]}" if arr.ndim == 2 else f"shape {arr.shape}"
+        hint = (
+            " (no telemetry rows: enable the Lepton's telemetry)"
+            if arr.shape == IMAGE_SHAPE
+            else ""
+        )
         raise InputError(
-            f"Lepton frame: expected {w}x{h} Y16 (160x120 image + 2 telemetry rows), got {got}"
+            f"Lepton frame: expected {w}x{h} Y16 (160x120 image + 2 telemetry rows), "
+            f"got {got}{hint}"
         )
     if arr.dtype != np.uint16:
         raise InputError(f"Lepton frame: expected 16-bit Y16 pixels (uint16), got {arr.dtype}")
