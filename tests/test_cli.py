@@ -75,3 +75,87 @@ def test_counts_to_celsius_applies_emissivity_and_distance() -> None:
 def test_counts_to_celsius_bad_options(kwargs: dict[str, object], message: str) -> None:
     with pytest.raises(InputError, match=message):
         counts_to_celsius([8500.0], **kwargs)  # type: ignore[arg-type]
+
+
+# -- devices and record ----------------------------------------------------------------------
+
+
+def test_describe_devices_says_clearly_when_nothing_is_attached() -> None:
+    from thermodepth.cli import describe_devices
+
+    lines = describe_devices(
+        {
+            "realsense": [],
+            "purethermal": [],
+            "video": [{"index": 0, "name": "Integrated Camera", "purethermal": False}],
+        }
+    )
+    assert lines == [
+        "no RealSense device found",
+        "no PureThermal (Lepton) found; other video devices: /dev/video0 (Integrated Camera)",
+    ]
+    found = describe_devices(
+        {
+            "realsense": [
+                {"name": "Intel RealSense D435", "serial": "123", "firmware": "5.16", "usb": "3.2"}
+            ],
+            "purethermal": [{"index": 2, "name": "PureThermal (fw:v1.3.0)", "purethermal": True}],
+            "video": [],
+        }
+    )
+    assert found[0].endswith("-> --source realsense:123")
+    assert found[1].endswith("-> --source lepton:2")
+
+
+def test_devices_command_runs() -> None:
+    result = runner.invoke(app, ["devices", "--json"])
+    assert result.exit_code == 0, result.output
+    listed = json.loads(result.output)
+    assert set(listed) == {"realsense", "purethermal", "video"}
+
+
+def test_record_sim_command(tmp_path: Path) -> None:
+    from thermodepth.io.recording import Recording
+
+    out = tmp_path / "s.zarr"
+    result = runner.invoke(app, ["record", "--source", "sim", "-o", str(out), "--frames", "3"])
+    assert result.exit_code == 0, result.output
+    assert "recorded 3 pairs (3 depth, 3 thermal frames), dropped 0" in result.output
+    assert "stopped: frames" in result.output
+    assert Recording(out).n_pairs == 3
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--source", "sim"], "--source sim never ends: give --frames or --duration"),
+        (["--source", "sim", "--frames", "0"], "--frames: must be at least 1"),
+        (["--source", "sim", "--duration", "-1"], "--duration: must be > 0 seconds"),
+        (["--source", "nope", "--frames", "1"], "--source: unknown 'nope'"),
+        (
+            ["--source", "recording:{tmp}/none.zarr", "--frames", "1"],
+            "{tmp}/none.zarr: no such recording",
+        ),
+        (
+            ["--source", "sim", "--frames", "1", "--max-skew-ms", "-2"],
+            "--max-skew-ms: must be >= 0",
+        ),
+    ],
+)
+def test_record_bad_input_is_one_line(tmp_path: Path, args: list[str], message: str) -> None:
+    out = tmp_path / "o.zarr"
+    args = [a.format(tmp=tmp_path) for a in args]
+    result = runner.invoke(app, ["record", *args, "-o", str(out)])
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("error: ")
+    assert message.format(tmp=tmp_path) in lines[0]
+
+
+def test_record_refuses_to_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "o.zarr"
+    out.mkdir()
+    result = runner.invoke(app, ["record", "--source", "sim", "--frames", "1", "-o", str(out)])
+    assert result.exit_code == 2
+    assert f"{out}: already exists (choose another output or remove it)" in result.output

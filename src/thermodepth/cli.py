@@ -188,8 +188,8 @@ def parse_floats(text: str, option: str) -> list[float]:
 
 
 @contextmanager
-def progress_bar(description: str, total: int) -> Iterator[Callable[[int], None]]:
-    """A rich progress bar; yields ``advance(n)``."""
+def progress_bar(description: str, total: int | None) -> Iterator[Callable[[int], None]]:
+    """A rich progress bar (``total`` None: no known end); yields ``advance(n)``."""
     with Progress(
         SpinnerColumn(),
         TextColumn("{task.description}"),
@@ -516,6 +516,125 @@ def paper_tables_cmd(
         f"what the paper does not show: single readings are off by up to "
         f"{o['max_abs_error_c']:.2f} C (RMSE {o['rmse_c']:.3f} C over {o['n']})"
     )
+
+
+# -- cameras and recordings -------------------------------------------------------------------
+
+
+@app.command("devices")
+@one_line_errors
+def devices_cmd(
+    as_json: Annotated[bool, typer.Option("--json", help="Print as JSON.")] = False,
+) -> None:
+    """List attached RealSense cameras and PureThermal (Lepton) boards."""
+    from .sources import list_devices
+
+    found = list_devices()
+    if as_json:
+        print(json.dumps(found, indent=2))
+        return
+    for line in describe_devices(found):
+        console.print(line, highlight=False)
+
+
+def describe_devices(found: dict[str, list[dict[str, Any]]]) -> list[str]:
+    """Lines for ``thermodepth devices``: each device with its source spec, and a clear
+    "no ... found" for each kind missing."""
+    lines = []
+    if found["realsense"]:
+        for d in found["realsense"]:
+            lines.append(
+                f"RealSense {d['name']}  serial {d['serial']}  firmware {d['firmware']}  "
+                f"USB {d['usb']}  -> --source realsense:{d['serial']}"
+            )
+    else:
+        lines.append("no RealSense device found")
+    if found["purethermal"]:
+        for d in found["purethermal"]:
+            lines.append(
+                f"PureThermal (Lepton) /dev/video{d['index']} {d['name']!r}  "
+                f"-> --source lepton:{d['index']}"
+            )
+    else:
+        others = [
+            f"/dev/video{d['index']} ({d['name'] or 'unnamed'})"
+            for d in found["video"]
+            if not d["purethermal"]
+        ]
+        lines.append(
+            "no PureThermal (Lepton) found"
+            + (f"; other video devices: {', '.join(others)}" if others else "")
+        )
+    return lines
+
+
+@app.command("record")
+@one_line_errors
+def record_cmd(
+    source: Annotated[
+        str,
+        typer.Option(
+            "--source",
+            "-s",
+            help="sim, realsense[:SERIAL|:FILE], lepton[:N], realsense+lepton, recording:PATH.",
+        ),
+    ],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Recording to create (.zarr).")],
+    duration: Annotated[
+        float | None, typer.Option("--duration", help="Stop after so many seconds.")
+    ] = None,
+    frames: Annotated[
+        int | None, typer.Option("--frames", help="Stop after so many pairs (or frames).")
+    ] = None,
+    calibration: Annotated[
+        Path | None,
+        typer.Option(
+            help="Calibration file (thermal intrinsics, extrinsics) to store; a RealSense's "
+            "own depth intrinsics replace its depth section (sim and recordings keep theirs)."
+        ),
+    ] = None,
+    max_skew_ms: Annotated[
+        float, typer.Option(help="Pairing: drop pairs further apart in time, ms.")
+    ] = 20.0,
+    ir: Annotated[bool, typer.Option("--ir", help="Also record the infrared image.")] = False,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing recording.")] = False,
+) -> None:
+    """Record a source into a crash-safe Zarr v3 recording (Ctrl-C stops cleanly)."""
+    from .calibration import Calibration
+    from .session import record_session
+    from .sources import open_source
+
+    if duration is not None and duration <= 0:
+        raise InputError("--duration: must be > 0 seconds")
+    if frames is not None and frames < 1:
+        raise InputError("--frames: must be at least 1")
+    if duration is None and frames is None and source.strip() == "sim":
+        raise InputError("--source sim never ends: give --frames or --duration")
+    if max_skew_ms < 0:
+        raise InputError("--max-skew-ms: must be >= 0")
+    cal = Calibration.load(calibration) if calibration else None
+    src = open_source(source, cal, max_skew_s=max_skew_ms / 1000.0, with_ir=ir, warn=_warn_line)
+    with progress_bar(f"recording {src.name}", frames) as advance:
+        result = record_session(
+            src,
+            out,
+            duration_s=duration,
+            frames=frames,
+            calibration=cal,
+            overwrite=overwrite,
+            progress=advance,
+        )
+    console.print(
+        f"wrote {out}: {result.recorder.summary()}; stopped: {result.stopped}", soft_wrap=True
+    )
+    if result.pairing is not None:
+        console.print(f"pairing: {result.pairing.summary()}", soft_wrap=True)
+    if result.error:
+        raise ThermodepthError(f"{result.error}; the recording keeps every frame up to then")
+
+
+def _warn_line(message: str) -> None:
+    err_console.print(f"[yellow]warning:[/yellow] {message}", highlight=False, soft_wrap=True)
 
 
 def main() -> None:

@@ -75,3 +75,60 @@ class FramePair:
     def skew_s(self) -> float:
         """depth_time_s - thermal_time_s."""
         return self.depth_time_s - self.thermal_time_s
+
+
+@dataclass(frozen=True, eq=False)
+class DepthFrame:
+    """One frame of the depth camera's stream, before pairing.
+
+    depth: (H, W) uint16 device units (0 = invalid); time_s: capture time in seconds on the
+    clock the thermal stream shares; index: the frame's number in its stream (the device's
+    frame counter where it has one); ir: optional (H, W) uint8 infrared image.
+    """
+
+    depth: NDArray[np.uint16]
+    time_s: float
+    index: int
+    ir: NDArray[np.uint8] | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class ThermalFrame:
+    """One frame of the thermal camera's stream, before pairing.
+
+    counts: (h, w) uint16 raw counts; time_s: capture time in seconds (same clock as the
+    depth stream); index: the frame's number in its stream; telemetry: the frame's decoded
+    telemetry.
+    """
+
+    counts: NDArray[np.uint16]
+    time_s: float
+    index: int
+    telemetry: Telemetry
+
+
+def pair_of(depth: DepthFrame, thermal: ThermalFrame, index: int) -> FramePair:
+    """The FramePair of two stream frames, numbered ``index``."""
+    return FramePair(
+        depth.depth,
+        thermal.counts,
+        depth.time_s,
+        thermal.time_s,
+        thermal.telemetry,
+        index,
+        depth.ir,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Match:
+    """A pair and the two stream frames it was made of (what recorders store: the frames
+    once, the pair as a reference to them)."""
+
+    depth: DepthFrame
+    thermal: ThermalFrame
+    pair: FramePair
+
+
+StreamEvent = DepthFrame | ThermalFrame | Match
+"""What a source emits, in order: stream frames as they arrive and pairs as they form."""

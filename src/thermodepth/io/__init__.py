@@ -1,0 +1,1 @@
+"""Sinks and stored data: recordings (zarr)."""
