@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 import sys
 
-BENCHMARKS = ["bench_sim"]
+BENCHMARKS = ["bench_sim", "bench_registration"]
 
 
 def main(names: list[str]) -> None:
