@@ -637,6 +637,107 @@ def _warn_line(message: str) -> None:
     err_console.print(f"[yellow]warning:[/yellow] {message}", highlight=False, soft_wrap=True)
 
 
+# -- run ------------------------------------------------------------------------------------
+
+
+@app.command("run")
+@one_line_errors
+def run_cmd(
+    source: Annotated[
+        str,
+        typer.Option(
+            help="Where frames come from: sim, realsense+lepton, recording:PATH (see README)."
+        ),
+    ] = "sim",
+    settings: Annotated[
+        Path | None, typer.Option(help="Settings YAML (calibration, compensation, rules).")
+    ] = None,
+    record: Annotated[
+        Path | None, typer.Option(help="Also record everything to this .zarr.")
+    ] = None,
+    frames: Annotated[int | None, typer.Option(help="Stop after this many pairs.")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("-o", "--out", help="Write measurements.jsonl and alarms.jsonl here."),
+    ] = None,
+    quiet: Annotated[bool, typer.Option(help="No line per frame.")] = False,
+) -> None:
+    """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
+    result = run(source, settings, record, frames, out, None if quiet else print_frame)
+    console.print(
+        f"{result.frames} frames fused ({result.shutter_frames} while the shutter was "
+        f"closed), {sum(e['event'] == 'alarm' for e in result.events)} alarms; "
+        f"stopped: {result.stopped}"
+    )
+    if result.recorder is not None:
+        console.print(f"recorded to {record}: {result.recorder.summary()}")
+    if result.error:
+        raise InputError(result.error)
+
+
+def run(
+    source_spec: str,
+    settings_path: Path | None,
+    record: Path | None = None,
+    frames: int | None = None,
+    out: Path | None = None,
+    on_frame: Callable[[Any], None] | None = None,
+) -> Any:
+    """Open the source and the pipeline, then :func:`thermodepth.session.run_session`."""
+    from .calibration import Calibration
+    from .pipeline import Pipeline, Settings
+    from .session import run_session
+    from .sources import open_source
+
+    settings = Settings.load(settings_path) if settings_path else Settings()
+    cal = Calibration.load(settings.calibration) if settings.calibration else None
+    src = open_source(
+        source_spec,
+        cal,
+        frames=frames,
+        warn=lambda msg: err_console.print(f"[yellow]warning:[/yellow] {msg}"),
+    )
+    calibration = src.calibration or cal
+    if calibration is None:
+        src.close()
+        raise InputError(
+            f"--source {source_spec}: no calibration; give one in the settings (calibration: FILE)"
+        )
+    try:
+        pipeline = Pipeline(settings, calibration)
+    except BaseException:
+        src.close()
+        raise
+    return run_session(src, pipeline, frames=frames, record=record, out_dir=out, on_frame=on_frame)
+
+
+def print_frame(fused: Any) -> None:
+    """One line per fused frame: time, VOx, the hottest hotspot, ROIs, alarms."""
+    if fused.in_ffc:
+        console.print(
+            f"[dim]frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  shutter "
+            "closed (FFC): not measured[/dim]"
+        )
+        return
+    parts = [
+        f"frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  VOx {fused.vox_temp_c:5.2f} C"
+    ]
+    if fused.hotspots:
+        h = fused.hotspots[0]
+        parts.append(
+            f"hottest {h.max_c:6.2f} C at {h.distance_m:.2f} m "
+            f"({h.area_m2 * 1e4:.1f} cm2{'' if h.resolvable else ', too small'})"
+        )
+    parts += [f"{r.name} {r.mean_c:.2f} C" for r in fused.rois if r.n]
+    console.print("  ".join(parts), highlight=False, soft_wrap=True)
+    for e in fused.events:
+        style = "bold red" if e["event"] == "alarm" else "green"
+        console.print(
+            f"[{style}]{e['event'].upper()} {e['rule']}: {e['value_c']} C "
+            f"(above {e['above_c']} C for {e['for_frames']} frames)[/{style}]"
+        )
+
+
 def main() -> None:
     """Console-script entry point."""
     app()

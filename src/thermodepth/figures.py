@@ -12,6 +12,7 @@ from .sweep import SweepTable
 
 if TYPE_CHECKING:
     from .evaluation import RegistrationError
+    from .pipeline import FusedFrame
 
 
 def _pyplot() -> Any:
@@ -117,3 +118,62 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
             ax.legend(fontsize=7, ncol=2)
         paths.append(_save(fig, Path(out_dir) / name))
     return paths
+
+
+def plot_overlay(
+    frame: FusedFrame,
+    path: str | Path,
+    title: str | None = None,
+    vmin_c: float | None = None,
+    vmax_c: float | None = None,
+) -> Path:
+    """The fused temperature (colour map) over the depth camera's IR image (or a shaded
+    depth map), hotspot boxes labelled in C, metres and cm^2, and a colour bar."""
+    from matplotlib.patches import Rectangle
+
+    from .measure import hotspot_box_on_depth
+
+    plt = _pyplot()
+    cal = frame.calibration
+    h, w = cal.depth.shape
+    fig, ax = plt.subplots(figsize=(w / 100 + 1.6, h / 100 + 0.6), dpi=100)
+    if frame.ir is not None:
+        ax.imshow(frame.ir, cmap="gray", vmin=0, vmax=255)
+    else:  # near is light, far is dark
+        z = frame.depth_m
+        lo, hi = np.nanpercentile(z, [2, 98]) if np.isfinite(z).any() else (0.0, 1.0)
+        ax.imshow(
+            np.nan_to_num((hi - z) / max(hi - lo, 1e-6), nan=0.0), cmap="gray", vmin=0, vmax=1
+        )
+    t = frame.temp_depth_c
+    finite = np.isfinite(t)
+    lo_c = (
+        vmin_c if vmin_c is not None else (float(np.nanpercentile(t, 1)) if finite.any() else 0.0)
+    )
+    hi_c = vmax_c if vmax_c is not None else (float(np.nanmax(t)) if finite.any() else 1.0)
+    im = ax.imshow(np.ma.masked_invalid(t), cmap="inferno", vmin=lo_c, vmax=hi_c, alpha=0.7)
+    for hs in frame.hotspots:
+        box = hotspot_box_on_depth(
+            hs, frame.z_thermal_m, cal.thermal, cal.depth, cal.thermal_from_depth
+        )
+        if box is None:
+            continue
+        u0, v0, u1, v1 = box
+        color = "cyan" if hs.resolvable else "yellow"
+        ax.add_patch(Rectangle((u0, v0), u1 - u0, v1 - v0, fill=False, ec=color, lw=1.5))
+        label = f"{hs.max_c:.1f} C  {hs.distance_m:.2f} m  {hs.area_m2 * 1e4:.1f} cm$^2$" + (
+            "" if hs.resolvable else "  (too small: reads low)"
+        )
+        ax.text(
+            u0,
+            max(v0 - 6, 10),
+            label,
+            color=color,
+            fontsize=9,
+            va="bottom",
+            bbox={"facecolor": "black", "alpha": 0.5, "pad": 1, "lw": 0},
+        )
+    fig.colorbar(im, ax=ax, fraction=0.03, pad=0.01, label="temperature (C)")
+    ax.set_title(title or f"frame {frame.index}: VOx {frame.vox_temp_c:.2f} C", fontsize=10)
+    ax.set_axis_off()
+    return _save(fig, path)

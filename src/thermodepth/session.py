@@ -127,3 +127,84 @@ def record_session(
 
 def _finite(x: float) -> float | None:
     return x if math.isfinite(x) else None
+
+
+@dataclass
+class RunResult:
+    """How a measuring run went: frames fused, frames skipped (shutter closed), alarm events,
+    why it stopped (as :class:`RecordResult`), and the recording's stats if one was made."""
+
+    frames: int = 0
+    shutter_frames: int = 0
+    events: list[dict[str, Any]] = field(default_factory=list)
+    stopped: str = "end"
+    error: str | None = None
+    recorder: RecorderStats | None = None
+    pairing: PairingStats | None = None
+
+
+def run_session(
+    source: Source,
+    pipeline: Any,
+    *,
+    frames: int | None = None,
+    record: str | Path | None = None,
+    out_dir: str | Path | None = None,
+    on_frame: Callable[[Any], None] | None = None,
+) -> RunResult:
+    """Fuse every pair of ``source`` through ``pipeline`` (a
+    :class:`~thermodepth.pipeline.Pipeline`) until ``frames`` pairs, the end, Ctrl-C or a lost
+    device; optionally record everything the source emits at ``record`` (closed cleanly in
+    every case) and write ``measurements.jsonl`` (one JSON object per fused frame) and
+    ``alarms.jsonl`` (alarm events) into ``out_dir``. ``on_frame(fused)`` per frame."""
+    import json
+
+    recorder = open_recorder(source, record, pipeline.calibration) if record else None
+    result = RunResult(recorder=recorder.stats if recorder else None, pairing=source.pairing)
+    sinks = []
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        sinks = [
+            open(Path(out_dir) / n, "w", encoding="utf-8")  # noqa: SIM115
+            for n in ("measurements.jsonl", "alarms.jsonl")
+        ]
+    pairs = tee(source, recorder) if recorder else iter(source)
+    try:
+        for pair in pairs:
+            fused = pipeline.process(pair)
+            result.frames += 1
+            result.shutter_frames += fused.in_ffc
+            result.events.extend(fused.events)
+            if sinks:
+                sinks[0].write(json.dumps(jsonable(fused.summary())) + "\n")
+                for event in fused.events:
+                    sinks[1].write(json.dumps(jsonable(event)) + "\n")
+            if on_frame:
+                on_frame(fused)
+            if frames is not None and result.frames >= frames:
+                result.stopped = "frames"
+                break
+    except KeyboardInterrupt:
+        result.stopped = "interrupted"
+    except DeviceLostError as exc:
+        result.stopped = "device lost"
+        result.error = str(exc)
+    finally:
+        source.close()
+        for sink in sinks:
+            sink.close()
+        if recorder is not None:
+            recorder.close({"stopped": result.stopped})
+    return result
+
+
+def jsonable(x: Any) -> Any:
+    """Plain, strict-JSON data: numpy scalars to Python, NaN and infinities to None."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [jsonable(v) for v in x]
+    value = x.item() if hasattr(x, "item") else x
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

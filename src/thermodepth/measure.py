@@ -1,0 +1,406 @@
+"""Measurements on fused frames: ROI statistics, spot temperatures, hotspots in 3D, alarms.
+
+Pure functions over arrays; the pipeline calls them on every fused frame. Temperatures in
+Celsius (the user's unit), lengths in metres, areas in m^2, power in watts.
+
+Hotspots are connected regions of thermal pixels at or above a threshold, found on the
+thermal grid (the temperature's own resolution). Their geometry comes from the depth
+camera: each pixel's surface point (the z-buffer's nearest Z), a plane fitted through them,
+and each thermal pixel's footprint on that plane (its four corner rays intersected with it).
+So the area is in m^2 on the surface, whatever the distance and the tilt. A hotspot smaller
+than 3 x 3 thermal pixels is not ``resolvable``: its reading is biased low (the pixel
+footprint and optics blur average it with its surroundings), the usual measurement-spot rule.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .camera import Intrinsics, RigidTransform
+from .radiometry import STEFAN_BOLTZMANN, celsius_to_kelvin
+
+FloatArray = NDArray[np.floating]
+BoolArray = NDArray[np.bool_]
+
+
+# ---------------------------------------------------------------------------------------------
+# ROIs
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RectRoi:
+    """Pixels u0 <= u < u1, v0 <= v < v1 of the depth image."""
+
+    name: str
+    u0: int
+    v0: int
+    u1: int
+    v1: int
+
+    def mask(self, shape: tuple[int, int], depth_m: FloatArray | None = None) -> BoolArray:
+        m = np.zeros(shape, dtype=bool)
+        m[max(self.v0, 0) : self.v1, max(self.u0, 0) : self.u1] = True
+        return m
+
+
+@dataclass(frozen=True)
+class PolygonRoi:
+    """The inside of a polygon of depth-image pixel vertices [(u, v), ...]."""
+
+    name: str
+    vertices: tuple[tuple[float, float], ...]
+
+    def mask(self, shape: tuple[int, int], depth_m: FloatArray | None = None) -> BoolArray:
+        m = np.zeros(shape, dtype=np.uint8)
+        pts = np.round(np.asarray(self.vertices, np.float64)).astype(np.int32)
+        cv2.fillPoly(m, [pts], 1)
+        return m.astype(bool)
+
+
+@dataclass(frozen=True)
+class DepthRangeRoi:
+    """Everything between ``near_m`` and ``far_m`` from the depth camera (Z)."""
+
+    name: str
+    near_m: float
+    far_m: float
+
+    def mask(self, shape: tuple[int, int], depth_m: FloatArray | None = None) -> BoolArray:
+        if depth_m is None:
+            raise ValueError(f"ROI {self.name!r}: a depth range needs the depth map")
+        with np.errstate(invalid="ignore"):
+            return (depth_m >= self.near_m) & (depth_m <= self.far_m)
+
+
+Roi = RectRoi | PolygonRoi | DepthRangeRoi
+
+
+@dataclass(frozen=True)
+class RoiStats:
+    """Statistics of the valid temperatures inside an ROI (C); n = 0 means none was valid.
+    flags: OR of the compensation flags of the pixels it covers."""
+
+    name: str
+    n: int
+    mean_c: float
+    max_c: float
+    min_c: float
+    sd_c: float
+    flags: int = 0
+
+
+def roi_stats(
+    name: str, temp_c: FloatArray, mask: BoolArray, flags: NDArray[np.uint8] | None = None
+) -> RoiStats:
+    """Mean, max, min and SD of finite ``temp_c`` inside ``mask`` (same shape)."""
+    values = temp_c[mask]
+    values = values[np.isfinite(values)]
+    flag = int(np.bitwise_or.reduce(flags[mask], initial=0)) if flags is not None else 0
+    if values.size == 0:
+        nan = float("nan")
+        return RoiStats(name, 0, nan, nan, nan, nan, flag)
+    return RoiStats(
+        name,
+        int(values.size),
+        float(values.mean()),
+        float(values.max()),
+        float(values.min()),
+        float(values.std()),
+        flag,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Spots
+# ---------------------------------------------------------------------------------------------
+
+
+def spot_at_pixel(temp_depth_c: FloatArray, u: int, v: int) -> float:
+    """Temperature (C) seen at depth pixel (u, v); NaN where none."""
+    h, w = temp_depth_c.shape
+    if not (0 <= u < w and 0 <= v < h):
+        return float("nan")
+    return float(temp_depth_c[v, u])
+
+
+def spot_at_point(
+    point_m: Sequence[float],
+    temp_thermal_c: FloatArray,
+    z_thermal_m: FloatArray,
+    thermal: Intrinsics,
+    thermal_from_depth: RigidTransform,
+    tolerance_m: float = 0.05,
+) -> float:
+    """Temperature (C) of the surface at a 3D point (depth camera frame, metres): the thermal
+    pixel it projects to, provided that pixel's nearest surface is the point's (within
+    ``tolerance_m``); NaN if hidden or outside the thermal image."""
+    p = thermal_from_depth.apply(np.asarray(point_m, np.float64))
+    px = thermal.project(p)
+    if not np.all(np.isfinite(px)) or not thermal.contains(px):
+        return float("nan")
+    u, v = (int(np.floor(c + 0.5)) for c in px)
+    if not abs(float(z_thermal_m[v, u]) - p[2]) <= tolerance_m:
+        return float("nan")
+    return float(temp_thermal_c[v, u])
+
+
+# ---------------------------------------------------------------------------------------------
+# Hotspots
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Hotspot:
+    """A connected region of thermal pixels at or above the threshold.
+
+    max_c, mean_c: temperature (C); centroid_m: area-weighted surface centroid in the depth
+    camera's frame (m); distance_m: its distance from the depth camera; area_m2: the surface
+    it covers; thermal_px: how many thermal pixels; bbox_thermal: (u0, v0, u1, v1) inclusive;
+    resolvable: its core (pixels within 10 % of its excess over the threshold from the
+    maximum) holds a full 3 x 3 block (otherwise its reading is biased low);
+    power_w: net radiated power, sum over its pixels of A eps sigma (T^4 - T_amb^4)
+    (paper eq. 14); flags: OR of the compensation flags of its pixels; label: its index.
+    """
+
+    label: int
+    max_c: float
+    mean_c: float
+    centroid_m: tuple[float, float, float]
+    distance_m: float
+    area_m2: float
+    thermal_px: int
+    bbox_thermal: tuple[int, int, int, int]
+    resolvable: bool
+    power_w: float
+    flags: int = 0
+    pixels: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, np.int64), repr=False, compare=False
+    )
+
+    def as_dict(self) -> dict[str, Any]:
+        d = {k: v for k, v in self.__dict__.items() if k != "pixels"}
+        d["centroid_m"] = list(self.centroid_m)
+        d["bbox_thermal"] = list(self.bbox_thermal)
+        return d
+
+
+def _plane(points: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+    """Centroid and unit normal of the least-squares plane, or None if degenerate."""
+    if len(points) < 3:
+        return None
+    c = points.mean(axis=0)
+    _, s, vt = np.linalg.svd(points - c, full_matrices=False)
+    if s[1] < 1e-9:  # collinear
+        return None
+    return c, vt[2]
+
+
+def _footprints(
+    pixels_uv: FloatArray, thermal: Intrinsics, plane: tuple[FloatArray, FloatArray]
+) -> FloatArray:
+    """Area (m^2) of each thermal pixel's footprint on a plane (thermal frame): its four
+    corner rays intersected with the plane, the quadrilateral's area."""
+    c, n = plane
+    offs = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    corners = pixels_uv[:, None, :] + offs[None]  # (N, 4, 2)
+    x, y = thermal.normalized_from_pixels(corners)
+    rays = np.stack([x, y, np.ones_like(x)], axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (c @ n) / (rays @ n)
+    q = rays * t[..., None]  # (N, 4, 3)
+    area = 0.5 * np.linalg.norm(np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1]), axis=-1)
+    return np.where(np.isfinite(area) & (t > 0).all(axis=1), area, np.nan)
+
+
+def find_hotspots(
+    temp_thermal_c: FloatArray,
+    z_thermal_m: FloatArray,
+    threshold_c: float,
+    thermal: Intrinsics,
+    thermal_from_depth: RigidTransform,
+    ambient_temp_c: float,
+    emissivity: float | FloatArray = 0.95,
+    flags: NDArray[np.uint8] | None = None,
+    min_thermal_px: int = 1,
+) -> list[Hotspot]:
+    """Hotspots of a thermal-grid temperature map (h, w), hottest first.
+
+    z_thermal_m: the nearest surface's Z per thermal pixel (registration's depth_to_thermal),
+    NaN where unknown: those pixels count in the region but not in its geometry.
+    """
+    with np.errstate(invalid="ignore"):
+        hot = (temp_thermal_c >= threshold_c).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(hot, connectivity=8)
+    depth_from_thermal = thermal_from_depth.inverse()
+    eps = np.broadcast_to(np.asarray(emissivity, np.float64), temp_thermal_c.shape)
+    t_amb4 = float(celsius_to_kelvin(ambient_temp_c)) ** 4
+    out = []
+    for k in range(1, n):
+        if stats[k, cv2.CC_STAT_AREA] < min_thermal_px:
+            continue
+        v, u = np.nonzero(labels == k)
+        temps = temp_thermal_c[v, u]
+        z = z_thermal_m[v, u]
+        known = np.isfinite(z)
+        uv = np.stack([u, v], axis=-1).astype(np.float64)
+        pts_t = thermal.deproject(uv[known], z[known])
+        plane = _plane(pts_t)
+        if plane is None and known.any():  # too few points: face the camera at their depth
+            c = pts_t.mean(axis=0)
+            plane = (c, c / np.linalg.norm(c))
+        area = _footprints(uv[known], thermal, plane) if plane is not None else np.zeros(0)
+        good = np.isfinite(area)
+        if good.any():
+            w = area[good]
+            centroid_t = (pts_t[good] * w[:, None]).sum(axis=0) / w.sum()
+            centroid = depth_from_thermal.apply(centroid_t)
+            t4 = celsius_to_kelvin(temps[known][good]) ** 4
+            power = float(np.sum(w * eps[v, u][known][good] * STEFAN_BOLTZMANN * (t4 - t_amb4)))
+            area_m2 = float(w.sum())
+        else:
+            centroid = np.full(3, np.nan)
+            power = area_m2 = float("nan")
+        x0, y0 = stats[k, cv2.CC_STAT_LEFT], stats[k, cv2.CC_STAT_TOP]
+        bw, bh = stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]
+        # the blur spreads a small target over a halo above the threshold: judge the spot
+        # rule on its core, the pixels within 10 % of its excess over the threshold from the
+        # maximum (a target that fills 3 x 3 pixels reads flat there)
+        box = temp_thermal_c[y0 : y0 + bh, x0 : x0 + bw]
+        t_max = np.nanmax(temps)
+        with np.errstate(invalid="ignore"):
+            core_px = (labels[y0 : y0 + bh, x0 : x0 + bw] == k) & (
+                box >= t_max - 0.1 * (t_max - threshold_c)
+            )
+        core = cv2.erode(
+            core_px.astype(np.uint8),
+            np.ones((3, 3), np.uint8),
+            borderType=cv2.BORDER_CONSTANT,
+            borderValue=0,
+        )
+        flag = int(np.bitwise_or.reduce(flags[v, u], initial=0)) if flags is not None else 0
+        out.append(
+            Hotspot(
+                label=k,
+                max_c=float(np.nanmax(temps)),
+                mean_c=float(np.nanmean(temps)),
+                centroid_m=(float(centroid[0]), float(centroid[1]), float(centroid[2])),
+                distance_m=float(np.linalg.norm(centroid)),
+                area_m2=area_m2,
+                thermal_px=int(u.size),
+                bbox_thermal=(int(x0), int(y0), int(x0 + bw - 1), int(y0 + bh - 1)),
+                resolvable=bool(core.any()),
+                power_w=power,
+                flags=flag,
+                pixels=(v * temp_thermal_c.shape[1] + u).astype(np.int64),
+            )
+        )
+    out.sort(key=lambda h: -h.max_c)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Alarms
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AlarmRule:
+    """Raise when ``what`` is above ``above_c`` for ``for_frames`` frames in a row.
+
+    what: ``"hotspot"`` (the hottest hotspot's max) or the name of an ROI (its max).
+    """
+
+    name: str
+    above_c: float
+    for_frames: int = 1
+    what: str = "hotspot"
+
+
+@dataclass
+class AlarmTracker:
+    """Counts consecutive frames over each rule; emits an event when a rule trips and when
+    it clears. Events are plain dicts ready for JSON lines."""
+
+    rules: Sequence[AlarmRule]
+    counts: dict[str, int] = field(default_factory=dict)
+    active: set[str] = field(default_factory=set)
+
+    def update(
+        self, time_s: float, frame_index: int, hotspots: Sequence[Hotspot], rois: Iterable[RoiStats]
+    ) -> list[dict[str, Any]]:
+        by_name = {r.name: r for r in rois}
+        events = []
+        for rule in self.rules:
+            if rule.what == "hotspot":
+                subject: Any = hotspots[0] if hotspots else None
+                value = subject.max_c if subject else float("nan")
+            else:
+                subject = by_name.get(rule.what)
+                value = subject.max_c if subject and subject.n else float("nan")
+            over = bool(np.isfinite(value) and value > rule.above_c)
+            self.counts[rule.name] = self.counts.get(rule.name, 0) + 1 if over else 0
+            tripped = self.counts[rule.name] >= rule.for_frames
+            if tripped and rule.name not in self.active:
+                self.active.add(rule.name)
+                events.append(_event("alarm", rule, time_s, frame_index, value, subject))
+            elif not over and rule.name in self.active:
+                self.active.discard(rule.name)
+                events.append(_event("clear", rule, time_s, frame_index, value, subject))
+        return events
+
+
+def _event(
+    kind: str, rule: AlarmRule, time_s: float, frame_index: int, value: float, subject: Any
+) -> dict[str, Any]:
+    event: dict[str, Any] = {
+        "event": kind,
+        "rule": rule.name,
+        "time_s": round(time_s, 4),
+        "frame": frame_index,
+        "above_c": rule.above_c,
+        "for_frames": rule.for_frames,
+        "value_c": None if not np.isfinite(value) else round(value, 3),
+    }
+    if isinstance(subject, Hotspot):
+        event["hotspot"] = {
+            k: v
+            for k, v in subject.as_dict().items()
+            if k in ("max_c", "mean_c", "centroid_m", "distance_m", "area_m2", "resolvable")
+        }
+    elif isinstance(subject, RoiStats):
+        event["roi"] = subject.name
+    return event
+
+
+def hotspot_box_on_depth(
+    hotspot: Hotspot,
+    z_thermal_m: FloatArray,
+    thermal: Intrinsics,
+    depth: Intrinsics,
+    thermal_from_depth: RigidTransform,
+) -> tuple[int, int, int, int] | None:
+    """Bounding box (u0, v0, u1, v1) in the depth image of a hotspot's surface points (its
+    thermal pixels' corners at their depth); None when none of them has a depth."""
+    w_t = z_thermal_m.shape[1]
+    v, u = np.divmod(hotspot.pixels, w_t)
+    z = z_thermal_m[v, u]
+    ok = np.isfinite(z)
+    if not ok.any():
+        return None
+    offs = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    corners = np.stack([u[ok], v[ok]], -1)[:, None, :] + offs[None]
+    pts = thermal.deproject(corners, np.repeat(z[ok][:, None], 4, axis=1))
+    px = depth.project(thermal_from_depth.inverse().apply(pts)).reshape(-1, 2)
+    px = px[np.isfinite(px).all(axis=1)]
+    if px.size == 0:
+        return None
+    lo = np.clip(np.floor(px.min(axis=0)), 0, [depth.width - 1, depth.height - 1])
+    hi = np.clip(np.ceil(px.max(axis=0)), 0, [depth.width - 1, depth.height - 1])
+    return int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1])

@@ -1,0 +1,408 @@
+"""The fusion pipeline: FramePair in, FusedFrame out.
+
+For every frame pair:
+
+1. registration, depth -> thermal: the nearest surface's Z and range per thermal pixel;
+2. radiometry on the thermal grid: counts -> temperature with emissivity, reflected
+   surroundings and the air along each pixel's own range; with a compensation model, the
+   sensor's VOx effect is undone too (``radiance``: on the counts; ``paper``: eq. 20 on the
+   reading, at the pixel's distance);
+3. registration, thermal -> depth: temperature on the depth grid (occlusion-aware);
+4. measurements: ROI statistics, hotspots in 3D, alarm rules.
+
+One :class:`Settings` object (YAML) configures it all. Thermal pixels that no depth pixel
+reaches (beyond the depth camera's range, invalid depth) are computed at a fallback
+distance and flagged ``NO_DISTANCE``; a frame taken while the shutter is closed (FFC) is all
+NaN, flagged ``SHUTTER``; invalid counts give NaN flagged ``BAD_COUNTS``. The stream goes on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntFlag
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from .calibration import Calibration, describe_validation_error, read_mapping
+from .compensation import Flag, PaperModel, RadianceModel, load_model
+from .errors import InputError
+from .frames import FramePair
+from .measure import (
+    AlarmRule,
+    AlarmTracker,
+    DepthRangeRoi,
+    Hotspot,
+    PolygonRoi,
+    RectRoi,
+    Roi,
+    RoiStats,
+    find_hotspots,
+    roi_stats,
+)
+from .radiometry import (
+    PLANCK_PRESETS,
+    ObjectParams,
+    PlanckConstants,
+    RadiometryParams,
+    celsius_to_kelvin,
+    invalid_counts,
+    raw_to_celsius,
+)
+from .registration import DepthOnThermal, Reason, Registration
+
+FloatArray = NDArray[np.float32]
+
+
+class PixelFlag(IntFlag):
+    """Per thermal pixel: the compensation's flags (same bits as
+    :class:`thermodepth.compensation.Flag`) and the pipeline's own."""
+
+    OK = 0
+    DISTANCE_OUTSIDE = Flag.DISTANCE_OUTSIDE
+    VOX_OUTSIDE = Flag.VOX_OUTSIDE
+    TEMPERATURE_OUTSIDE = Flag.TEMPERATURE_OUTSIDE
+    INVALID = Flag.INVALID
+    NO_DISTANCE = 16  # no depth pixel reaches it: computed at the fallback distance
+    BAD_COUNTS = 32  # NaN, negative or above the ADC range
+    SHUTTER = 64  # the frame shows the closed shutter (FFC), not the scene
+
+
+# ---------------------------------------------------------------------------------------------
+# Settings
+# ---------------------------------------------------------------------------------------------
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
+
+
+class PlanckSettings(_Strict):
+    R: float = Field(gt=0)
+    B: float = Field(gt=0)
+    F: float
+    O: float  # noqa: E741 (the paper's and FLIR's name)
+
+
+class RadiometrySettings(_Strict):
+    emissivity: float = Field(default=0.95, gt=0, le=1)
+    ambient_temp_c: float = 25.0
+    reflected_temp_c: float | None = None
+    humidity_pct: float = Field(default=50.0, ge=0, le=100)
+    method: Literal["flir", "thermimage"] = "flir"
+    planck: Literal["paper2022"] | PlanckSettings = "paper2022"
+
+    def constants(self) -> PlanckConstants:
+        if isinstance(self.planck, str):
+            return PLANCK_PRESETS[self.planck]
+        return PlanckConstants(**self.planck.model_dump())
+
+
+class RegistrationSettings(_Strict):
+    method: Literal["reproject", "paper"] = "reproject"
+    interpolation: Literal["nearest", "bilinear"] = "nearest"
+
+
+class HotspotSettings(_Strict):
+    threshold_c: float = 50.0
+    min_thermal_px: int = Field(default=1, ge=1)
+
+
+class RoiSettings(_Strict):
+    name: str
+    rect: tuple[int, int, int, int] | None = None
+    polygon: list[tuple[float, float]] | None = Field(default=None, min_length=3)
+    depth_range_m: tuple[float, float] | None = None
+
+    @model_validator(mode="after")
+    def _one_shape(self) -> RoiSettings:
+        given = [k for k in ("rect", "polygon", "depth_range_m") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(
+                "give exactly one of rect [u0, v0, u1, v1], polygon "
+                "[[u, v], ...] or depth_range_m [near, far]"
+            )
+        return self
+
+    def roi(self) -> Roi:
+        if self.rect is not None:
+            return RectRoi(self.name, *self.rect)
+        if self.polygon is not None:
+            return PolygonRoi(self.name, tuple(self.polygon))
+        assert self.depth_range_m is not None
+        return DepthRangeRoi(self.name, *self.depth_range_m)
+
+
+class AlarmSettings(_Strict):
+    name: str
+    above_c: float
+    for_frames: int = Field(default=1, ge=1)
+    what: str = "hotspot"
+
+
+class Settings(_Strict):
+    """Everything the pipeline needs, from one YAML file (paths relative to it)."""
+
+    calibration: Path | None = None
+    compensation: Path | None = None
+    radiometry: RadiometrySettings = RadiometrySettings()
+    registration: RegistrationSettings = RegistrationSettings()
+    hotspots: HotspotSettings = HotspotSettings()
+    rois: list[RoiSettings] = []
+    alarms: list[AlarmSettings] = []
+    fallback_distance_m: float | None = Field(default=None, gt=0)
+
+    @classmethod
+    def load(cls, path: str | Path) -> Settings:
+        """Read and validate a settings YAML; one InputError line names file and field."""
+        p = Path(path)
+        data = read_mapping(p)
+        try:
+            s = cls.model_validate(data)
+        except ValidationError as exc:
+            raise InputError(f"{p}: {describe_validation_error(exc)}") from None
+        base = p.parent
+        return s.model_copy(
+            update={
+                "calibration": None if s.calibration is None else base / s.calibration,
+                "compensation": None if s.compensation is None else base / s.compensation,
+            }
+        )
+
+    @model_validator(mode="after")
+    def _alarm_subjects(self) -> Settings:
+        names = {r.name for r in self.rois}
+        for a in self.alarms:
+            if a.what != "hotspot" and a.what not in names:
+                raise ValueError(
+                    f"alarm {a.name!r}: what={a.what!r} is neither 'hotspot' "
+                    f"nor an ROI name ({', '.join(sorted(names)) or 'none'})"
+                )
+        return self
+
+
+# ---------------------------------------------------------------------------------------------
+# The fused frame
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(eq=False)
+class FusedFrame:
+    """One fused frame.
+
+    Thermal grid (h, w): temp_thermal_c (compensated temperature, C), flags_thermal
+    (:class:`PixelFlag`), z_thermal_m / range_thermal_m (nearest surface, NaN where none).
+    Depth grid (H, W): temp_depth_c (C, NaN where reason_depth != Reason.OK), reason_depth
+    (:class:`~thermodepth.registration.Reason`), depth (the raw uint16 frame).
+    Measurements: hotspots (hottest first), rois, events (alarms raised or cleared).
+    """
+
+    index: int
+    depth_time_s: float
+    thermal_time_s: float
+    vox_temp_c: float
+    in_ffc: bool
+    temp_thermal_c: FloatArray
+    flags_thermal: NDArray[np.uint8]
+    z_thermal_m: FloatArray
+    range_thermal_m: FloatArray
+    temp_depth_c: FloatArray
+    reason_depth: NDArray[np.uint8]
+    depth: NDArray[np.uint16]
+    calibration: Calibration
+    hotspots: list[Hotspot] = field(default_factory=list)
+    rois: list[RoiStats] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    ir: NDArray[np.uint8] | None = None
+
+    @cached_property
+    def depth_m(self) -> FloatArray:
+        """Depth Z in metres (H, W), NaN where invalid."""
+        z = self.depth.astype(np.float32) * np.float32(self.calibration.depth_scale_m)
+        z[self.depth == 0] = np.nan
+        return z
+
+    def points(self) -> tuple[NDArray[np.float64], FloatArray]:
+        """3D points (N, 3) in the depth camera's frame (m) of the depth pixels that have a
+        temperature, and their temperatures (N,) in C."""
+        ok = self.reason_depth == Reason.OK
+        v, u = np.nonzero(ok)
+        pts = self.calibration.depth.deproject(np.stack([u, v], -1), self.depth_m[ok])
+        return pts, self.temp_depth_c[ok]
+
+    def summary(self) -> dict[str, Any]:
+        """Measurements as plain data (JSON lines)."""
+        return {
+            "frame": self.index,
+            "thermal_time_s": round(self.thermal_time_s, 4),
+            "depth_time_s": round(self.depth_time_s, 4),
+            "vox_temp_c": round(self.vox_temp_c, 3),
+            "in_ffc": self.in_ffc,
+            "hotspots": [h.as_dict() for h in self.hotspots],
+            "rois": [r.__dict__ for r in self.rois],
+            "events": self.events,
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# The pipeline
+# ---------------------------------------------------------------------------------------------
+
+
+class Pipeline:
+    """Turns FramePairs into FusedFrames (see the module docstring).
+
+    calibration: overrides ``settings.calibration`` (e.g. the one a source or recording
+    carries). Raises InputError when neither gives one, or a frame's size does not match it.
+    """
+
+    def __init__(
+        self, settings: Settings | None = None, calibration: Calibration | None = None
+    ) -> None:
+        self.settings = s = settings or Settings()
+        if calibration is None:
+            if s.calibration is None:
+                raise InputError(
+                    "no calibration: give one in the settings (calibration: FILE) "
+                    "or use a source that carries one"
+                )
+            calibration = Calibration.load(s.calibration)
+        self.calibration = calibration
+        self.registration = Registration(calibration, s.registration.method)
+        self.model = load_model(s.compensation) if s.compensation is not None else None
+        r = s.radiometry
+        self.ambient_c = r.ambient_temp_c
+        ambient_k = float(celsius_to_kelvin(r.ambient_temp_c))
+        reflected_k = float(
+            celsius_to_kelvin(
+                r.reflected_temp_c if r.reflected_temp_c is not None else r.ambient_temp_c
+            )
+        )
+        self.params = RadiometryParams(
+            planck=r.constants(),
+            obj=ObjectParams(
+                emissivity=r.emissivity,
+                distance_m=0.0,
+                reflected_temp_k=reflected_k,
+                atmosphere_temp_k=ambient_k,
+                relative_humidity=r.humidity_pct / 100.0,
+            ),
+        )
+        self.rois = [roi.roi() for roi in s.rois]
+        self.alarms = AlarmTracker(
+            [AlarmRule(a.name, a.above_c, a.for_frames, a.what) for a in s.alarms]
+        )
+
+    # -- steps ------------------------------------------------------------------------------
+
+    def _check(self, pair: FramePair) -> None:
+        cal = self.calibration
+        for name, img, intr in (
+            ("depth", pair.depth, cal.depth),
+            ("thermal", pair.thermal, cal.thermal),
+        ):
+            if img.shape != intr.shape:
+                raise InputError(
+                    f"frame {pair.index}: the {name} image is {img.shape[1]}x{img.shape[0]} "
+                    f"but the calibration's {name} camera is {intr.width}x{intr.height}"
+                )
+
+    def temperatures(
+        self, counts: NDArray[np.generic], vox_c: float, distance_m: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.uint8]]:
+        """Temperature (C) and flags of thermal counts, at per-pixel distances (m)."""
+        r = self.settings.radiometry
+        c = np.asarray(counts, dtype=np.float64)
+        method = r.method
+        if isinstance(self.model, RadianceModel):
+            temp, flags = self.model.apply_counts(
+                c, vox_c, distance_m, r.ambient_temp_c, r.humidity_pct, r.emissivity
+            )
+        elif isinstance(self.model, PaperModel):
+            measured = raw_to_celsius(c, self.params, method)  # no distance correction
+            temp, flags = self.model.apply(measured, vox_c, distance_m)
+        else:
+            temp = raw_to_celsius(c, self.params.with_object(distance_m=distance_m), method)
+            flags = np.where(np.isfinite(temp), 0, Flag.INVALID).astype(np.uint8)
+        bad = invalid_counts(c, self.params)
+        flags = flags | np.where(bad, np.uint8(PixelFlag.BAD_COUNTS), np.uint8(0))
+        return np.where(bad, np.nan, temp).astype(np.float32), flags.astype(np.uint8)
+
+    def process(self, pair: FramePair) -> FusedFrame:
+        """Fuse one frame pair (steps in the module docstring)."""
+        self._check(pair)
+        s = self.settings
+        near = self.registration.depth_to_thermal(pair.depth)
+        distance = near.range_m
+        missing = np.isnan(distance)
+        if missing.any():
+            fallback = s.fallback_distance_m or (
+                float(np.nanmedian(distance)) if not missing.all() else 1.0
+            )
+            distance = np.where(missing, np.float32(fallback), distance)
+        vox_c = pair.telemetry.fpa_temp_c
+        if pair.telemetry.in_ffc:
+            temp = np.full(pair.thermal.shape, np.nan, np.float32)
+            flags = np.full(pair.thermal.shape, PixelFlag.SHUTTER, np.uint8)
+        else:
+            temp, flags = self.temperatures(pair.thermal, vox_c, distance)
+        flags |= np.where(missing, np.uint8(PixelFlag.NO_DISTANCE), np.uint8(0))
+        temp_depth, reason = self.registration.thermal_to_depth(
+            pair.depth, temp, s.registration.interpolation, nearest=near
+        )
+        frame = FusedFrame(
+            pair.index,
+            pair.depth_time_s,
+            pair.thermal_time_s,
+            vox_c,
+            pair.telemetry.in_ffc,
+            temp,
+            flags,
+            near.z_m,
+            near.range_m,
+            temp_depth,
+            reason,
+            pair.depth,
+            self.calibration,
+            ir=pair.ir,
+        )
+        if not frame.in_ffc:  # measurements never use the shutter's image
+            self.measure(frame)
+        return frame
+
+    def measure(self, frame: FusedFrame) -> None:
+        """Fill in the frame's hotspots, ROI statistics and alarm events."""
+        s = self.settings
+        cal = self.calibration
+        frame.hotspots = find_hotspots(
+            frame.temp_thermal_c,
+            frame.z_thermal_m,
+            s.hotspots.threshold_c,
+            cal.thermal,
+            cal.thermal_from_depth,
+            self.ambient_c,
+            s.radiometry.emissivity,
+            frame.flags_thermal,
+            s.hotspots.min_thermal_px,
+        )
+        shape = cal.depth.shape
+        frame.rois = []
+        if self.rois:
+            # each ROI carries the flags of the thermal pixels it sees (one more pass)
+            near = DepthOnThermal(frame.z_thermal_m, frame.range_thermal_m)
+            mapped = self.registration.thermal_to_depth(
+                frame.depth, frame.flags_thermal.astype(np.float32), nearest=near
+            ).values
+            flags_depth = np.nan_to_num(mapped, nan=0.0).astype(np.uint8)
+        for roi in self.rois:
+            depth_m = frame.depth_m if isinstance(roi, DepthRangeRoi) else None
+            frame.rois.append(
+                roi_stats(roi.name, frame.temp_depth_c, roi.mask(shape, depth_m), flags_depth)
+            )
+        frame.events = self.alarms.update(
+            frame.thermal_time_s, frame.index, frame.hotspots, frame.rois
+        )

@@ -1,0 +1,277 @@
+"""The fusion pipeline end to end on the simulated rig: temperatures, hotspots in 3D, flags,
+settings, outputs, and `thermodepth run` (live, recorded, replayed)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from thermodepth.cli import app
+from thermodepth.compensation import Flag, save_model
+from thermodepth.errors import InputError
+from thermodepth.evaluation import compensation_generalisation
+from thermodepth.figures import plot_overlay
+from thermodepth.frames import FramePair
+from thermodepth.io.pointcloud import read_ply, write_ply
+from thermodepth.pipeline import (
+    HotspotSettings,
+    Pipeline,
+    PixelFlag,
+    RoiSettings,
+    Settings,
+)
+from thermodepth.registration import Reason
+from thermodepth.sim import Rig, camera_pose, constant_fpa, plate_scene
+
+runner = CliRunner()
+CHIP = np.array([0.06, -0.05, -0.003])  # the chip's centre in the world (plate at the origin)
+
+
+def inspection_rig(distance_m: float, fpa_c: float = 35.0, **kw: object) -> Rig:
+    return Rig(
+        plate_scene(chip_temp_c=70.0),
+        camera_pose(distance_m),
+        start_s=1.0,
+        fpa=constant_fpa(fpa_c + 273.15),
+        **kw,
+    )  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("model") / "model.json"
+    save_model(compensation_generalisation(samples=150, seed=2).models["radiance"], path)
+    return path
+
+
+def test_pixel_flags_extend_the_compensation_flags() -> None:
+    for f in Flag:
+        assert PixelFlag[f.name].value == f.value
+    assert not (PixelFlag.NO_DISTANCE | PixelFlag.BAD_COUNTS | PixelFlag.SHUTTER) & 0b1111
+
+
+def test_inspection_frame_at_half_a_metre() -> None:
+    rig = inspection_rig(0.5)
+    pipe = Pipeline(
+        Settings(
+            hotspots=HotspotSettings(threshold_c=50.0),
+            rois=[RoiSettings(name="plate", depth_range_m=(0.45, 0.55))],
+        ),
+        rig.calibration,
+    )
+    frame = pipe.process(rig.frame())
+    assert frame.temp_thermal_c.shape == (120, 160) and frame.temp_depth_c.shape == (720, 1280)
+    h = frame.hotspots[0]
+    assert h.resolvable and h.max_c == pytest.approx(70.0, abs=0.5)
+    truth_centre = rig.pose.inverse().apply(CHIP)
+    assert np.linalg.norm(np.array(h.centroid_m) - truth_centre) < 0.01
+    assert h.distance_m == pytest.approx(np.linalg.norm(truth_centre), abs=0.01)
+    # 2 x 2 cm chip = 4 cm^2; the region above 50 C includes some of the optics' halo
+    assert 4e-4 < h.area_m2 < 6e-4
+    # the plate's ROI (everything 0.45-0.55 m away): its median is the plate's 39 C
+    temps = frame.temp_depth_c[(frame.depth_m > 0.45) & (frame.depth_m < 0.55)]
+    assert np.nanmedian(temps) == pytest.approx(39.0, abs=0.1)
+    assert frame.rois[0].n > 100_000
+
+
+def test_compensation_in_the_pipeline_removes_the_vox_effect(model_path: Path) -> None:
+    plain, compensated = [], []
+    for vox in (25.0, 40.0):
+        rig = inspection_rig(1.2, fpa_c=vox)
+        pair = rig.frame()
+        for settings, out in (
+            (Settings(), plain),
+            (Settings(compensation=model_path), compensated),
+        ):
+            frame = Pipeline(settings, rig.calibration).process(pair)
+            plate = frame.temp_thermal_c[55:62, 70:78]  # inside the plate, away from the chip
+            out.append(float(np.median(plate)))
+    assert plain[1] - plain[0] > 2.0  # the VOx effect: ~2.7 C over 25 -> 40 C
+    assert compensated == pytest.approx([39.0, 39.0], abs=0.1)
+
+
+def test_vox_outside_the_model_is_flagged_on_measurements(model_path: Path) -> None:
+    rig = inspection_rig(1.0, fpa_c=55.0)
+    pipe = Pipeline(
+        Settings(
+            compensation=model_path,
+            hotspots=HotspotSettings(threshold_c=50),
+            rois=[RoiSettings(name="all", rect=(0, 0, 1280, 720))],
+        ),
+        rig.calibration,
+    )
+    frame = pipe.process(rig.frame())
+    assert frame.hotspots and all(h.flags & Flag.VOX_OUTSIDE for h in frame.hotspots)
+    assert frame.rois[0].flags & Flag.VOX_OUTSIDE
+
+
+def test_shutter_frame_and_bad_counts_keep_the_stream_going() -> None:
+    rig = inspection_rig(1.0)
+    pipe = Pipeline(Settings(), rig.calibration)
+    pair = rig.frame()
+    shut = replace(pair, telemetry=replace(pair.telemetry, ffc_state=2))
+    f = pipe.process(shut)
+    assert f.in_ffc and np.isnan(f.temp_thermal_c).all() and not f.hotspots
+    assert np.all(f.flags_thermal & PixelFlag.SHUTTER)
+    bad = replace(pair, thermal=np.full((120, 160), 65535, np.uint16))  # above 14 bits
+    f = pipe.process(bad)
+    assert np.isnan(f.temp_thermal_c).all() and np.all(f.flags_thermal & PixelFlag.BAD_COUNTS)
+    assert np.isnan(f.temp_depth_c).all()
+    good = pipe.process(rig.frame())
+    assert np.isfinite(good.temp_thermal_c).mean() > 0.99
+
+
+def test_thermal_pixels_without_depth_are_flagged() -> None:
+    rig = inspection_rig(1.0)
+    pair = rig.frame()
+    depth = pair.depth.copy()
+    depth[:, :640] = 0  # the left half of the depth image is lost
+    f = Pipeline(Settings(), rig.calibration).process(replace(pair, depth=depth))
+    no_depth = (f.flags_thermal & PixelFlag.NO_DISTANCE).astype(bool)
+    assert 0.3 < no_depth.mean() < 0.7
+    assert np.isfinite(f.temp_thermal_c[no_depth]).all()  # computed at the fallback distance
+    assert np.all(f.reason_depth[:, :640] == Reason.INVALID_DEPTH)
+
+
+def test_calibration_that_does_not_match_the_frames() -> None:
+    rig = inspection_rig(1.0)
+    pair = rig.frame()
+    small = FramePair(
+        pair.depth[:480, :640].copy(),
+        pair.thermal,
+        pair.depth_time_s,
+        pair.thermal_time_s,
+        pair.telemetry,
+        7,
+    )
+    with pytest.raises(
+        InputError,
+        match="frame 7: the depth image is 640x480 but the calibration's depth camera is 1280x720",
+    ):
+        Pipeline(Settings(), rig.calibration).process(small)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("emisivity: 0.9\n", "emisivity: unknown key"),
+        ("radiometry: {emissivity: 1.5}\n", "radiometry.emissivity: Input should be less than"),
+        ("hotspots: {threshold_c: hot}\n", "hotspots.threshold_c: Input should be a valid number"),
+        (
+            "rois: [{name: a, rect: [0, 0, 10, 10], depth_range_m: [1, 2]}]\n",
+            "rois.0: give exactly one of",
+        ),
+        ("alarms: [{name: x, above_c: 60, what: pump}]\n", "what='pump' is neither 'hotspot'"),
+        ("registration: {method: magic}\n", "registration.method: Input should be 'reproject'"),
+    ],
+)
+def test_bad_settings_are_one_line(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    with pytest.raises(InputError, match=message) as info:
+        Settings.load(path)
+    assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
+
+
+def test_settings_paths_are_relative_to_the_file(tmp_path: Path, model_path: Path) -> None:
+    rig = inspection_rig(1.0)
+    rig.calibration.save(tmp_path / "cal.yaml")
+    (tmp_path / "model.json").write_bytes(model_path.read_bytes())
+    (tmp_path / "s.yaml").write_text("calibration: cal.yaml\ncompensation: model.json\n")
+    pipe = Pipeline(Settings.load(tmp_path / "s.yaml"))
+    assert pipe.model is not None and pipe.calibration.thermal == rig.calibration.thermal
+
+
+def test_point_cloud_and_overlay(tmp_path: Path) -> None:
+    rig = inspection_rig(0.5, with_ir=True)
+    frame = Pipeline(Settings(hotspots=HotspotSettings(threshold_c=50)), rig.calibration).process(
+        rig.frame()
+    )
+    pts, temps = frame.points()
+    assert len(pts) == int((frame.reason_depth == Reason.OK).sum()) > 200_000
+    path = write_ply(tmp_path / "cloud.ply", pts, temps)
+    assert b"property float temperature" in path.read_bytes()[:400]
+    back_pts, back_t = read_ply(path)
+    np.testing.assert_allclose(back_pts, pts, atol=1e-6)
+    np.testing.assert_array_equal(back_t, temps)
+    hot = back_pts[back_t > 60]  # the chip: ~0.5 m in front, 6 cm right, 5 cm up
+    np.testing.assert_allclose(np.median(hot, axis=0), rig.pose.inverse().apply(CHIP), atol=0.01)
+    png = plot_overlay(frame, tmp_path / "overlay.png")
+    import cv2
+
+    img = cv2.imread(str(png))
+    assert img.shape[0] > 700 and img.shape[1] > 1280
+    assert img.std() > 10  # not blank
+
+
+def test_run_live_with_record_then_replay_gives_the_same_results(tmp_path: Path) -> None:
+    settings = tmp_path / "s.yaml"
+    settings.write_text(
+        "hotspots: {threshold_c: 50}\n"
+        "rois: [{name: plate, rect: [560, 300, 720, 420]}]\n"
+        "alarms: [{name: chip, above_c: 60, for_frames: 2}]\n"
+    )
+    live = runner.invoke(
+        app,
+        [
+            "run",
+            "--source",
+            "sim",
+            "--settings",
+            str(settings),
+            "--frames",
+            "6",
+            "--record",
+            str(tmp_path / "s.zarr"),
+            "-o",
+            str(tmp_path / "live"),
+        ],
+    )
+    assert live.exit_code == 0, live.output
+    assert "ALARM chip" in live.output and "shutter closed" in live.output
+    replay = runner.invoke(
+        app,
+        [
+            "run",
+            "--source",
+            f"recording:{tmp_path / 's.zarr'}",
+            "--settings",
+            str(settings),
+            "-o",
+            str(tmp_path / "replay"),
+            "--quiet",
+        ],
+    )
+    assert replay.exit_code == 0, replay.output
+    a = (tmp_path / "live" / "measurements.jsonl").read_text()
+    b = (tmp_path / "replay" / "measurements.jsonl").read_text()
+    assert a == b and len(a.splitlines()) == 6
+    alarms = [json.loads(x) for x in (tmp_path / "live" / "alarms.jsonl").read_text().splitlines()]
+    assert [e["event"] for e in alarms] == ["alarm"] and alarms[0]["value_c"] > 60
+
+
+def test_run_stops_cleanly_on_ctrl_c(tmp_path: Path) -> None:
+    from thermodepth.cli import run
+    from thermodepth.io.recording import Recording
+
+    seen = []
+
+    def interrupt_after_four(frame: object) -> None:
+        seen.append(frame)
+        if len(seen) == 4:
+            raise KeyboardInterrupt
+
+    result = run("sim", None, tmp_path / "r.zarr", None, None, interrupt_after_four)
+    assert result.stopped == "interrupted" and result.frames == 4
+    assert Recording(tmp_path / "r.zarr").n_pairs == 4  # every fused pair was recorded
+
+
+def test_run_without_calibration_is_one_line(tmp_path: Path) -> None:
+    (tmp_path / "s.yaml").write_text("calibration: nope.yaml\n")
+    res = runner.invoke(app, ["run", "--settings", str(tmp_path / "s.yaml")])
+    assert res.exit_code == 2 and "nope.yaml: cannot read" in res.output
