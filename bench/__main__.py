@@ -5,7 +5,13 @@ from __future__ import annotations
 import importlib
 import sys
 
-BENCHMARKS = ["bench_sim", "bench_registration", "bench_compensation", "bench_recording"]
+BENCHMARKS = [
+    "bench_sim",
+    "bench_registration",
+    "bench_compensation",
+    "bench_pipeline",
+    "bench_recording",
+]
 
 
 def main(names: list[str]) -> None:

@@ -15,7 +15,7 @@ The paper's section 2.1 (Lin & Yao 2022, eqs 1-13) is here as plain functions:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -291,6 +291,35 @@ class Intrinsics:
         px = np.asarray(pixels, dtype=np.float64)
         u, v = px[..., 0], px[..., 1]
         return (u >= -0.5) & (u < self.width - 0.5) & (v >= -0.5) & (v < self.height - 0.5)
+
+
+@lru_cache(maxsize=16)
+def _rays(intr: Intrinsics, supersample: int, corners: bool) -> tuple[FloatArray, FloatArray]:
+    if corners:
+        u = np.arange(intr.width + 1) - 0.5
+        v = np.arange(intr.height + 1) - 0.5
+    else:  # sub-pixel centres: pixel u spans u - 0.5 .. u + 0.5 in `supersample` cells
+        offs = (np.arange(supersample) + 0.5) / supersample - 0.5
+        u = (np.arange(intr.width)[:, None] + offs).ravel()
+        v = (np.arange(intr.height)[:, None] + offs).ravel()
+    uu, vv = np.meshgrid(u, v)
+    x, y = intr.normalized_from_pixels(np.stack([uu, vv], axis=-1))
+    x, y = np.ascontiguousarray(x), np.ascontiguousarray(y)
+    x.setflags(write=False)
+    y.setflags(write=False)
+    return x, y
+
+
+def pixel_rays(intr: Intrinsics, supersample: int = 1) -> tuple[FloatArray, FloatArray]:
+    """Undistorted normalised coordinates (x, y) of every pixel centre, each (H, W) (with
+    ``supersample``: of every sub-pixel centre, (H ss, W ss)). Cached per camera; read-only."""
+    return _rays(intr, supersample, False)
+
+
+def corner_rays(intr: Intrinsics) -> tuple[FloatArray, FloatArray]:
+    """Undistorted normalised coordinates (x, y) of every pixel corner, each (H + 1, W + 1):
+    corner [j, i] is at pixel position (i - 0.5, j - 0.5). Cached per camera; read-only."""
+    return _rays(intr, 1, True)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .camera import Intrinsics, RigidTransform
+from .camera import Intrinsics, RigidTransform, corner_rays, pixel_rays
 from .radiometry import STEFAN_BOLTZMANN, celsius_to_kelvin
 
 FloatArray = NDArray[np.floating]
@@ -203,18 +203,21 @@ def _plane(points: FloatArray) -> tuple[FloatArray, FloatArray] | None:
 
 
 def _footprints(
-    pixels_uv: FloatArray, thermal: Intrinsics, plane: tuple[FloatArray, FloatArray]
+    u: NDArray[np.int64],
+    v: NDArray[np.int64],
+    thermal: Intrinsics,
+    plane: tuple[FloatArray, FloatArray],
 ) -> FloatArray:
-    """Area (m^2) of each thermal pixel's footprint on a plane (thermal frame): its four
+    """Area (m^2) of thermal pixels' (u, v) footprints on a plane (thermal frame): the four
     corner rays intersected with the plane, the quadrilateral's area."""
     c, n = plane
-    offs = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
-    corners = pixels_uv[:, None, :] + offs[None]  # (N, 4, 2)
-    x, y = thermal.normalized_from_pixels(corners)
-    rays = np.stack([x, y, np.ones_like(x)], axis=-1)
+    cx, cy = corner_rays(thermal)
+    ci = np.stack([v, v, v + 1, v + 1], axis=-1)  # corners: top-left, top-right, ...
+    cj = np.stack([u, u + 1, u + 1, u], axis=-1)
+    rays = np.stack([cx[ci, cj], cy[ci, cj], np.ones(ci.shape)], axis=-1)  # (N, 4, 3)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (c @ n) / (rays @ n)
-    q = rays * t[..., None]  # (N, 4, 3)
+    q = rays * t[..., None]
     area = 0.5 * np.linalg.norm(np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1]), axis=-1)
     return np.where(np.isfinite(area) & (t > 0).all(axis=1), area, np.nan)
 
@@ -249,13 +252,14 @@ def find_hotspots(
         temps = temp_thermal_c[v, u]
         z = z_thermal_m[v, u]
         known = np.isfinite(z)
-        uv = np.stack([u, v], axis=-1).astype(np.float64)
-        pts_t = thermal.deproject(uv[known], z[known])
+        rx, ry = pixel_rays(thermal)
+        zk = z[known]
+        pts_t = np.stack([rx[v[known], u[known]] * zk, ry[v[known], u[known]] * zk, zk], -1)
         plane = _plane(pts_t)
         if plane is None and known.any():  # too few points: face the camera at their depth
             c = pts_t.mean(axis=0)
             plane = (c, c / np.linalg.norm(c))
-        area = _footprints(uv[known], thermal, plane) if plane is not None else np.zeros(0)
+        area = _footprints(u[known], v[known], thermal, plane) if plane is not None else np.zeros(0)
         good = np.isfinite(area)
         if good.any():
             w = area[good]

@@ -9,13 +9,12 @@ Z along the optical axis and the range is t |d|. Each rect is tested only inside
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Intrinsics, RigidTransform
+from ..camera import Intrinsics, RigidTransform, pixel_rays
 from .scene import Rect, Scene
 
 FloatArray = NDArray[np.float64]
@@ -103,29 +102,6 @@ def rect_params(rects: tuple[Rect, ...], camera_from_world: RigidTransform) -> F
     return out
 
 
-@lru_cache(maxsize=16)
-def _ray_grid(intr: Intrinsics, supersample: int) -> tuple[FloatArray, FloatArray]:
-    # Sub-pixel centres: pixel u spans u - 0.5 .. u + 0.5, split into `supersample` cells.
-    offs = (np.arange(supersample) + 0.5) / supersample - 0.5
-    u = (np.arange(intr.width)[:, None] + offs).ravel()
-    v = (np.arange(intr.height)[:, None] + offs).ravel()
-    if not intr.has_distortion:
-        xs = np.broadcast_to((u - intr.cx) / intr.fx, (v.size, u.size))
-        ys = np.broadcast_to(((v - intr.cy) / intr.fy)[:, None], (v.size, u.size))
-        return np.ascontiguousarray(xs), np.ascontiguousarray(ys)
-    uu, vv = np.meshgrid(u, v)
-    x, y = intr.normalized_from_pixels(np.stack([uu, vv], axis=-1))
-    return np.ascontiguousarray(x), np.ascontiguousarray(y)
-
-
-def ray_grid(intr: Intrinsics, supersample: int = 1) -> tuple[FloatArray, FloatArray]:
-    """Undistorted normalised ray coordinates (x, y), each (H*ss, W*ss), read-only, cached."""
-    xs, ys = _ray_grid(intr, supersample)
-    xs.setflags(write=False)
-    ys.setflags(write=False)
-    return xs, ys
-
-
 def _bbox(rect: Rect, camera_from_world: RigidTransform, intr: Intrinsics, ss: int) -> list[int]:
     """Inclusive (row0, row1, col0, col1) of the rect in the supersampled grid."""
     h, w = intr.height * ss, intr.width * ss
@@ -163,7 +139,7 @@ def cast(
     supersample: int = 1,
 ) -> Hits:
     """Cast one ray per (sub)pixel of a camera into the scene; arrays (H*ss, W*ss)."""
-    xs, ys = ray_grid(intr, supersample)
+    xs, ys = pixel_rays(intr, supersample)
     prims = rect_params(scene.rects, camera_from_world)
     bbox = np.array(
         [_bbox(r, camera_from_world, intr, supersample) for r in scene.rects], dtype=np.int64
