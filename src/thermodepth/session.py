@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,20 @@ from .frames import DepthFrame, FramePair, Match, ThermalFrame
 from .io.recording import Recorder, RecorderStats, RecordingWriter
 from .sources.base import DeviceLostError, Source, event_time_s
 from .sources.pairing import PairingStats
+
+
+@contextmanager
+def stopping(result: RecordResult | RunResult) -> Iterator[None]:
+    """Ctrl-C and a lost device end a session cleanly: they set ``result.stopped`` (and
+    ``result.error``) instead of propagating, so the caller's ``finally`` closes what it
+    opened and every frame up to then is kept."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        result.stopped = "interrupted"
+    except DeviceLostError as exc:
+        result.stopped = "device lost"
+        result.error = str(exc)
 
 
 @dataclass
@@ -86,28 +101,24 @@ def record_session(
     result = RecordResult(Path(out), recorder.stats, source.pairing)
     t0: float | None = None
     try:
-        if frames is not None and frames <= 0:
-            result.stopped = "frames"
-        else:
-            for event in source.events():
-                t = event_time_s(event)
-                t0 = t if t0 is None else t0
-                if duration_s is not None and t - t0 >= duration_s:
-                    result.stopped = "duration"
-                    break
-                recorder.add(event)
-                if isinstance(event, unit):
-                    result.counted += 1
-                    if progress:
-                        progress(1)
-                    if frames is not None and result.counted >= frames:
-                        result.stopped = "frames"
+        with stopping(result):
+            if frames is not None and frames <= 0:
+                result.stopped = "frames"
+            else:
+                for event in source.events():
+                    t = event_time_s(event)
+                    t0 = t if t0 is None else t0
+                    if duration_s is not None and t - t0 >= duration_s:
+                        result.stopped = "duration"
                         break
-    except KeyboardInterrupt:
-        result.stopped = "interrupted"
-    except DeviceLostError as exc:
-        result.stopped = "device lost"
-        result.error = str(exc)
+                    recorder.add(event)
+                    if isinstance(event, unit):
+                        result.counted += 1
+                        if progress:
+                            progress(1)
+                        if frames is not None and result.counted >= frames:
+                            result.stopped = "frames"
+                            break
     finally:
         source.close()
         extra: dict[str, Any] = {"stopped": result.stopped}
@@ -170,25 +181,21 @@ def run_session(
         ]
     pairs = tee(source, recorder) if recorder else iter(source)
     try:
-        for pair in pairs:
-            fused = pipeline.process(pair)
-            result.frames += 1
-            result.shutter_frames += fused.in_ffc
-            result.events.extend(fused.events)
-            if sinks:
-                sinks[0].write(json.dumps(jsonable(fused.summary())) + "\n")
-                for event in fused.events:
-                    sinks[1].write(json.dumps(jsonable(event)) + "\n")
-            if on_frame:
-                on_frame(fused)
-            if frames is not None and result.frames >= frames:
-                result.stopped = "frames"
-                break
-    except KeyboardInterrupt:
-        result.stopped = "interrupted"
-    except DeviceLostError as exc:
-        result.stopped = "device lost"
-        result.error = str(exc)
+        with stopping(result):
+            for pair in pairs:
+                fused = pipeline.process(pair)
+                result.frames += 1
+                result.shutter_frames += fused.in_ffc
+                result.events.extend(fused.events)
+                if sinks:
+                    sinks[0].write(json.dumps(jsonable(fused.summary())) + "\n")
+                    for event in fused.events:
+                        sinks[1].write(json.dumps(jsonable(event)) + "\n")
+                if on_frame:
+                    on_frame(fused)
+                if frames is not None and result.frames >= frames:
+                    result.stopped = "frames"
+                    break
     finally:
         source.close()
         for sink in sinks:
