@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from rich.markup import escape
 
 from thermodepth.calibration import Calibration
-from thermodepth.camera import Intrinsics, RigidTransform
+from thermodepth.camera import RigidTransform
 from thermodepth.registration import Reason, Registration
 from thermodepth.sim import Rig, default_calibration, occlusion_scene
 
@@ -62,6 +62,7 @@ from .peers import (
     register_depth_cv2,
     registration_tolerance,
     thermal_to_depth_agreement,
+    without_thermal_distortion,
 )
 
 N_FRAMES = 4
@@ -132,16 +133,6 @@ def single_threaded(fn: Callable[[int], object]) -> Callable[[int], object]:
             numba.set_num_threads(n)
 
     return run
-
-
-def without_thermal_distortion(cal: Calibration) -> Calibration:
-    t = cal.thermal
-    return Calibration(
-        cal.depth,
-        Intrinsics(t.width, t.height, t.fx, t.fy, t.cx, t.cy),
-        cal.depth_scale_m,
-        cal.thermal_from_depth,
-    )
 
 
 def _frames() -> list[Frame]:

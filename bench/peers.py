@@ -38,6 +38,7 @@ output plane is smaller than the depth image (opencv_contrib issue 3761; OpenCV 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -515,3 +516,8 @@ def depth_frame_z(calibration: Calibration, z_thermal: NDArray[np.floating]) -> 
     u, v = t.pixel_grid()
     points = t.deproject(np.stack([u, v], axis=-1), np.asarray(z_thermal, dtype=np.float64))
     return calibration.thermal_from_depth.inverse().apply(points)[..., 2]
+
+
+def without_thermal_distortion(cal: Calibration) -> Calibration:
+    """The same rig with a distortion-free thermal lens (the peers' other benchmark case)."""
+    return replace(cal, thermal=replace(cal.thermal, distortion=np.zeros(5)))

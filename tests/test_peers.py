@@ -26,26 +26,17 @@ from bench.peers import (
     registration_tolerance,
     rs_extrinsics,
     thermal_to_depth_agreement,
+    without_thermal_distortion,
 )
 from numpy.typing import NDArray
 
 from thermodepth.calibration import Calibration
-from thermodepth.camera import Intrinsics, RigidTransform, rotation_from_euler
+from thermodepth.camera import RigidTransform, rotation_from_euler
 from thermodepth.registration import Reason, Registration
 from thermodepth.sim import Rig, default_calibration, occlusion_scene
 
 F64 = NDArray[np.float64]
 IDENTITY = RigidTransform.identity("world", "depth")
-
-
-def without_thermal_distortion(cal: Calibration) -> Calibration:
-    t = cal.thermal
-    return Calibration(
-        cal.depth,
-        Intrinsics(t.width, t.height, t.fx, t.fy, t.cx, t.cy),
-        cal.depth_scale_m,
-        cal.thermal_from_depth,
-    )
 
 
 def thermal_index_image(cal: Calibration) -> NDArray[np.uint16]:
