@@ -302,13 +302,9 @@ class Registration:
     def _check_depth(self, depth: NDArray[np.uint16]) -> NDArray[np.uint16]:
         shape = self.calibration.depth.shape
         if not isinstance(depth, np.ndarray) or depth.dtype != np.uint16 or depth.shape != shape:
-            got = (
-                f"{depth.dtype} {depth.shape}"
-                if isinstance(depth, np.ndarray)
-                else type(depth).__name__
-            )
             raise ValueError(
-                f"depth must be a uint16 array of shape {shape} (H, W) in depth units, got {got}"
+                f"depth must be a uint16 array of shape {shape} (H, W) in depth "
+                f"units, got {_describe(depth)}"
             )
         return np.ascontiguousarray(depth)
 
@@ -319,14 +315,9 @@ class Registration:
             or thermal.shape != shape
             or thermal.dtype.kind not in "uif"
         ):
-            got = (
-                f"{thermal.dtype} {thermal.shape}"
-                if isinstance(thermal, np.ndarray)
-                else type(thermal).__name__
-            )
             raise ValueError(
                 f"thermal must be a numeric array of shape {shape} (h, w) "
-                f"(uint16 counts or float), got {got}"
+                f"(uint16 counts or float), got {_describe(thermal)}"
             )
         return np.ascontiguousarray(thermal, dtype=np.float32)
 
@@ -453,6 +444,11 @@ class Registration:
         xd, yd = d.normalized_from_pixels(np.stack([cols, rows], axis=-1))
         rng = (z * np.sqrt(xd * xd + yd * yd + 1)).astype(np.float32)
         return DepthOnThermal(z, rng)
+
+
+def _describe(a: object) -> str:
+    """An array's dtype and shape (or the type of what is not an array), for messages."""
+    return f"{a.dtype} {a.shape}" if isinstance(a, np.ndarray) else type(a).__name__
 
 
 def _ray_terms(cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
