@@ -253,6 +253,10 @@ def test_run_live_with_record_then_replay_gives_the_same_results(tmp_path: Path)
     assert a == b and len(a.splitlines()) == 6
     alarms = [json.loads(x) for x in (tmp_path / "live" / "alarms.jsonl").read_text().splitlines()]
     assert [e["event"] for e in alarms] == ["alarm"] and alarms[0]["value_c"] > 60
+    rows = (tmp_path / "live" / "hotspots.csv").read_text().splitlines()
+    assert rows[0].startswith("frame,thermal_time_s,vox_temp_c,label,max_c")
+    assert len(rows) == 1 + 3  # the chip in each of the 3 frames after the power-on FFC
+    assert float(rows[1].split(",")[9]) == pytest.approx(1.0, abs=0.02)  # distance_m
 
 
 def test_run_stops_cleanly_on_ctrl_c(tmp_path: Path) -> None:

@@ -16,6 +16,7 @@ from typing import Any
 
 from .calibration import Calibration
 from .frames import DepthFrame, FramePair, Match, ThermalFrame
+from .io.measurements import MeasurementWriter
 from .io.recording import Recorder, RecorderStats, RecordingWriter
 from .sources.base import DeviceLostError, Source, event_time_s
 from .sources.pairing import PairingStats
@@ -166,19 +167,11 @@ def run_session(
     """Fuse every pair of ``source`` through ``pipeline`` (a
     :class:`~thermodepth.pipeline.Pipeline`) until ``frames`` pairs, the end, Ctrl-C or a lost
     device; optionally record everything the source emits at ``record`` (closed cleanly in
-    every case) and write ``measurements.jsonl`` (one JSON object per fused frame) and
-    ``alarms.jsonl`` (alarm events) into ``out_dir``. ``on_frame(fused)`` per frame."""
-    import json
-
+    every case) and write the measurements into ``out_dir``
+    (:class:`~thermodepth.io.measurements.MeasurementWriter`). ``on_frame(fused)`` per frame."""
     recorder = open_recorder(source, record, pipeline.calibration) if record else None
     result = RunResult(recorder=recorder.stats if recorder else None, pairing=source.pairing)
-    sinks = []
-    if out_dir is not None:
-        Path(out_dir).mkdir(parents=True, exist_ok=True)
-        sinks = [
-            open(Path(out_dir) / n, "w", encoding="utf-8")  # noqa: SIM115
-            for n in ("measurements.jsonl", "alarms.jsonl")
-        ]
+    sink = MeasurementWriter(out_dir) if out_dir is not None else None
     pairs = tee(source, recorder) if recorder else iter(source)
     try:
         with stopping(result):
@@ -187,10 +180,8 @@ def run_session(
                 result.frames += 1
                 result.shutter_frames += fused.in_ffc
                 result.events.extend(fused.events)
-                if sinks:
-                    sinks[0].write(json.dumps(jsonable(fused.summary())) + "\n")
-                    for event in fused.events:
-                        sinks[1].write(json.dumps(jsonable(event)) + "\n")
+                if sink:
+                    sink.write(fused)
                 if on_frame:
                     on_frame(fused)
                 if frames is not None and result.frames >= frames:
@@ -198,20 +189,8 @@ def run_session(
                     break
     finally:
         source.close()
-        for sink in sinks:
+        if sink:
             sink.close()
         if recorder is not None:
             recorder.close({"stopped": result.stopped})
     return result
-
-
-def jsonable(x: Any) -> Any:
-    """Plain, strict-JSON data: numpy scalars to Python, NaN and infinities to None."""
-    if isinstance(x, dict):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [jsonable(v) for v in x]
-    value = x.item() if hasattr(x, "item") else x
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value

@@ -1,0 +1,91 @@
+"""Measurements on disk: per fused frame, one JSON line (``measurements.jsonl``), alarm events
+(``alarms.jsonl``) and a hotspot table (``hotspots.csv``, one row per hotspot and frame)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+HOTSPOT_COLUMNS = (
+    "frame",
+    "thermal_time_s",
+    "vox_temp_c",
+    "label",
+    "max_c",
+    "mean_c",
+    "x_m",
+    "y_m",
+    "z_m",
+    "distance_m",
+    "area_m2",
+    "thermal_px",
+    "resolvable",
+    "power_w",
+    "flags",
+)
+
+
+def jsonable(x: Any) -> Any:
+    """Plain, strict-JSON data: numpy scalars to Python, NaN and infinities to None."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [jsonable(v) for v in x]
+    value = x.item() if hasattr(x, "item") else x
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+class MeasurementWriter:
+    """Writes the measurements of fused frames into ``out_dir`` as they come; ``close()``
+    (or ``with``) flushes. Every line is complete when written."""
+
+    def __init__(self, out_dir: str | Path) -> None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        self._frames = open(out / "measurements.jsonl", "w", encoding="utf-8")  # noqa: SIM115
+        self._alarms = open(out / "alarms.jsonl", "w", encoding="utf-8")  # noqa: SIM115
+        self._hot_file = open(out / "hotspots.csv", "w", newline="", encoding="utf-8")  # noqa: SIM115
+        self._hotspots = csv.writer(self._hot_file)
+        self._hotspots.writerow(HOTSPOT_COLUMNS)
+
+    def write(self, fused: Any) -> None:
+        """One fused frame (a :class:`~thermodepth.pipeline.FusedFrame`)."""
+        self._frames.write(json.dumps(jsonable(fused.summary())) + "\n")
+        for event in fused.events:
+            self._alarms.write(json.dumps(jsonable(event)) + "\n")
+        for h in fused.hotspots:
+            x, y, z = h.centroid_m
+            self._hotspots.writerow(
+                [
+                    fused.index,
+                    f"{fused.thermal_time_s:.4f}",
+                    f"{fused.vox_temp_c:.2f}",
+                    h.label,
+                    f"{h.max_c:.3f}",
+                    f"{h.mean_c:.3f}",
+                    f"{x:.4f}",
+                    f"{y:.4f}",
+                    f"{z:.4f}",
+                    f"{h.distance_m:.4f}",
+                    f"{h.area_m2:.6g}",
+                    h.thermal_px,
+                    int(h.resolvable),
+                    f"{h.power_w:.4g}",
+                    h.flags,
+                ]
+            )
+
+    def close(self) -> None:
+        for f in (self._frames, self._alarms, self._hot_file):
+            f.close()
+
+    def __enter__(self) -> MeasurementWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
