@@ -30,7 +30,7 @@ import math
 import re
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -1098,8 +1098,7 @@ def _with_warnings(result: CalibrationResult) -> CalibrationResult:
     if result.outliers.any():
         names = ", ".join(p.name for p, f in zip(result.used, result.outliers, strict=True) if f)
         warn.append(f"outlier images: {names} (--drop-outliers fits without them)")
-    object.__setattr__(result, "warnings", tuple(warn))
-    return result
+    return replace(result, warnings=tuple(warn))
 
 
 # -- report files -----------------------------------------------------------------------------
