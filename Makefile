@@ -19,9 +19,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/thermodepth check-calibration examples/calibration.yaml
-	$(BIN)/thermodepth simulate sweep -o $(OUT)/sweep.csv --samples 600 --by-vox
-	$(BIN)/thermodepth simulate frames -o $(OUT)/frames --frames 3
+	$(BIN)/thermodepth demo --out $(OUT)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
