@@ -158,4 +158,4 @@ def test_record_refuses_to_overwrite(tmp_path: Path) -> None:
     out.mkdir()
     result = runner.invoke(app, ["record", "--source", "sim", "--frames", "1", "-o", str(out)])
     assert result.exit_code == 2
-    assert f"{out}: already exists (choose another output or remove it)" in result.output
+    assert f"{out}: already exists (choose another output, or --overwrite" in result.output
