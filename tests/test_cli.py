@@ -111,7 +111,7 @@ def test_devices_command_runs() -> None:
     result = runner.invoke(app, ["devices", "--json"])
     assert result.exit_code == 0, result.output
     listed = json.loads(result.output)
-    assert set(listed) == {"realsense", "purethermal", "video"}
+    assert set(listed) == {"realsense", "realsense_unavailable", "purethermal", "video"}
 
 
 def test_record_sim_command(tmp_path: Path) -> None:
