@@ -177,6 +177,23 @@ def test_record_a_realsense_file_then_replay(
     assert rec.calibration.depth_scale_m == pytest.approx(DEPTH_UNIT_M, rel=1e-6)
 
 
+def test_device_depth_is_recorded_without_a_calibration(
+    tmp_path: Path, depth_ir_file: Path
+) -> None:
+    result = record_session(open_source(f"realsense:{depth_ir_file}"), tmp_path / "nc.zarr")
+    assert result.counters == {"depth_restarts": 0}
+    rec = Recording(tmp_path / "nc.zarr")
+    assert rec.calibration is None  # no --calibration: nothing to merge with ...
+    device = rec.device_depth  # ... but the device's depth intrinsics and unit are kept
+    assert device is not None
+    cal = default_calibration().depth
+    assert (device["width"], device["height"]) == (1280, 720)
+    assert device["cx"] == pytest.approx(cal.cx - 1.25, abs=1e-4)
+    assert device["fy"] == pytest.approx(cal.fy * 1.001, rel=1e-6)
+    assert device["depth_scale_m"] == pytest.approx(DEPTH_UNIT_M, rel=1e-6)
+    assert rec.attrs["source_counters"] == {"depth_restarts": 0}
+
+
 def test_a_plus_in_the_file_name_is_part_of_the_path(
     tmp_path: Path, depth_ir_file: Path, sim_depth_frames
 ) -> None:  # type: ignore[no-untyped-def]

@@ -352,6 +352,17 @@ def test_overwrite_replaces_a_recording(tmp_path: Path) -> None:
     assert Recording(p).n_pairs == 1
 
 
+@pytest.mark.parametrize("out", ["{src}", "{src}/inside.zarr", "{tmp}"])
+def test_recording_over_its_own_source_is_refused(tmp_path: Path, out: str) -> None:
+    src = tmp_path / "a.zarr"
+    record_session(SimSource(sim_rig()), src, frames=2)
+    target = Path(out.format(src=src, tmp=tmp_path))
+    with pytest.raises(InputError, match=re.escape(f"{target}: the source reads {src}")):
+        record_session(open_source(f"recording:{src}"), target, overwrite=True)
+    rec = Recording(src)
+    assert rec.complete and rec.n_pairs == 2 and len(list(rec.pairs())) == 2  # untouched
+
+
 # -- damaged stores ---------------------------------------------------------------------------
 
 

@@ -147,6 +147,7 @@ def test_thermal_camera_lost_mid_stream_keeps_every_frame_recorded(tmp_path: Pat
     assert result.error == "fake-lepton: stopped delivering frames (unplugged?)"
     rec = Recording(tmp_path / "lost.zarr")
     assert rec.complete and rec.attrs["stopped"] == "device lost"
+    assert rec.attrs["error"] == result.error
     assert rec.n_thermal == 10  # every thermal frame delivered before the loss ...
     assert rec.n_pairs == result.pairing.pairs == 10  # type: ignore[union-attr]
     assert [p.thermal[0, 0] for p in rec.pairs()] == [8000 + k for k in range(10)]  # ... paired
