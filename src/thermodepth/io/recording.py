@@ -98,9 +98,9 @@ class CorruptFrameError(ThermodepthError):
 
 
 def compressors() -> list[Any]:
-    """Blosc zstd level 1 with byte shuffle (ratio 2.6 on simulated 1280x720 depth; the
-    compression alone takes 4.4 ms per depth frame on the 2-core test machine, the whole write
-    of a frame 9.2 ms: docs/recording.md), then a CRC-32C of the compressed chunk."""
+    """Blosc zstd level 1 with byte shuffle (ratio 2.6 on simulated 1280x720 depth; the cost
+    of compressing a depth frame and of its whole write are measured in docs/recording.md,
+    "Throughput"), then a CRC-32C of the compressed chunk."""
     return [BloscCodec(cname="zstd", clevel=1, shuffle="shuffle"), Crc32cCodec()]
 
 

@@ -9,13 +9,16 @@ spec                        what
 ``realsense[:SERIAL]``      a live RealSense (depth only: recordable, no pairs)
 ``realsense:FILE.bag|db3``  a RealSense recording played back (depth only)
 ``lepton[:INDEX]``          a Lepton 3 on a PureThermal, /dev/videoINDEX (thermal only)
-``realsense+lepton``        both cameras paired in time; each part takes its options, e.g.
-                            ``realsense:123456+lepton:2``
+``realsense+lepton``        both live cameras paired in time; each part takes its options,
+                            e.g. ``realsense:123456+lepton:2`` (a RealSense file cannot be
+                            paired with a live Lepton: their clocks differ)
 ``recording:PATH``          a thermodepth recording (zarr), replayed bit for bit
 ==========================  ===============================================================
 
-Every source yields :class:`~thermodepth.frames.FramePair` when iterated (if it has both
-streams) and :class:`~thermodepth.frames.StreamEvent` from ``events()`` (what recorders store).
+Parts are joined by a '+' followed by a source name, so a '+' inside a file name is kept
+(:func:`split_spec`). Every source yields :class:`~thermodepth.frames.FramePair` when iterated
+(if it has both streams; otherwise a one-line InputError) and
+:class:`~thermodepth.frames.StreamEvent` from ``events()`` (what recorders store).
 """
 
 from __future__ import annotations
