@@ -529,15 +529,16 @@ class RsPipeline:
         then: RsFrameset | None = None,
         wait_s: float = 0.002,
         broken_sensor: bool = False,
+        ppx: float = 1.0,
     ) -> None:
         self.script, self.then, self.wait_s = list(script), then, wait_s
-        self.broken_sensor = broken_sensor
+        self.broken_sensor, self.ppx = broken_sensor, ppx
         self.t0 = time.monotonic()
         self.waiting = self.stopped_during_wait = False
         self.stops: list[threading.Thread] = []
 
     def start(self, config: object) -> object:
-        return RsProfile(self.broken_sensor)
+        return RsProfile(self.broken_sensor, self.ppx)
 
     def try_wait_for_frames(self, timeout_ms: int) -> tuple[bool, RsFrameset | None]:
         assert time.monotonic() - self.t0 < 3.0, "the camera kept waiting for a new frame"
@@ -553,8 +554,8 @@ class RsPipeline:
 
 
 class RsProfile:
-    def __init__(self, broken_sensor: bool) -> None:
-        self.broken_sensor = broken_sensor
+    def __init__(self, broken_sensor: bool = False, ppx: float = 1.0) -> None:
+        self.broken_sensor, self.ppx = broken_sensor, ppx
 
     def get_device(self) -> RsProfile:
         return self
@@ -581,7 +582,7 @@ class RsProfile:
 
     def get_intrinsics(self) -> SimpleNamespace:
         return SimpleNamespace(
-            width=3, height=2, fx=2.0, fy=2.0, ppx=1.0, ppy=0.5, coeffs=[0.0] * 5
+            width=3, height=2, fx=2.0, fy=2.0, ppx=self.ppx, ppy=0.5, coeffs=[0.0] * 5
         )
 
 
@@ -591,7 +592,7 @@ def fake_pyrealsense2(pipeline: RsPipeline) -> SimpleNamespace:
     return SimpleNamespace(
         pipeline=lambda: pipeline,
         config=lambda: config,
-        context=lambda: SimpleNamespace(query_devices=lambda: [RsProfile(False)]),
+        context=lambda: SimpleNamespace(query_devices=lambda: [RsProfile()]),
         stream=SimpleNamespace(depth="depth", infrared="infrared"),
         format=SimpleNamespace(z16="z16", y8="y8"),
         timestamp_domain=SimpleNamespace(global_time="global_time", system_time="system_time"),
@@ -623,6 +624,16 @@ def test_realsense_failure_after_start_stops_the_pipeline(monkeypatch: pytest.Mo
     assert str(info.value) == (
         "realsense: cannot read the stream's profile (failed to query the depth sensor)"
     )
+    assert len(pipeline.stops) == 1
+
+
+def test_bad_device_intrinsics_stop_the_camera(monkeypatch: pytest.MonkeyPatch) -> None:
+    from thermodepth.sim.rig import default_calibration
+
+    pipeline = RsPipeline([], ppx=10.0)  # principal point outside the 3 px wide image
+    monkeypatch.setattr(realsense_mod, "import_realsense", lambda: fake_pyrealsense2(pipeline))
+    with pytest.raises(InputError, match=r"^realsense \(device depth intrinsics\): depth"):
+        open_source("realsense", default_calibration())
     assert len(pipeline.stops) == 1
 
 

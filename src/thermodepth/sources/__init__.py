@@ -81,6 +81,16 @@ def _device_calibration(camera: Any, calibration: Calibration | None) -> Calibra
     )
 
 
+def _closing_on_error(cameras: list[Any], build: Callable[[], Source]) -> Source:
+    """``build()``, or close the (already started) cameras if it fails."""
+    try:
+        return build()
+    except BaseException:
+        for cam in cameras:
+            cam.close()
+        raise
+
+
 def _open_both(opens: list[Callable[[], Any]], spec: str) -> list[Any]:
     """Open every camera; if any cannot be opened, close the others and raise one InputError
     naming every camera that failed."""
@@ -146,8 +156,11 @@ def open_source(
             ],
             text,
         )
-        return PairedSource(
-            depth_cam, thermal_cam, _device_calibration(depth_cam, calibration), max_skew_s
+        return _closing_on_error(
+            [depth_cam, thermal_cam],
+            lambda: PairedSource(
+                depth_cam, thermal_cam, _device_calibration(depth_cam, calibration), max_skew_s
+            ),
         )
     if kind == "sim":
         if arg:
@@ -166,7 +179,9 @@ def open_source(
         return RecordingSource(arg, warn, calibration)
     if kind == "realsense":
         cam = _realsense(arg, with_ir, warn)
-        return StreamSource(cam, "depth", _device_calibration(cam, calibration))
+        return _closing_on_error(
+            [cam], lambda: StreamSource(cam, "depth", _device_calibration(cam, calibration))
+        )
     if kind == "lepton":
         return StreamSource(_lepton(arg, thermal_latency_s), "thermal", calibration)
     raise InputError(f"--source: unknown {text!r}; expected one of {SPEC_HELP}")
