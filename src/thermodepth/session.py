@@ -11,6 +11,7 @@ counters).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -197,7 +198,7 @@ def record_session(
         unit = ThermalFrame
     result = RecordResult(path=Path(out), pairing=source.pairing)
     t0: float | None = None
-    opened = lambda: open_recorder(source, out, calibration, overwrite)  # noqa: E731
+    opened = functools.partial(open_recorder, source, out, calibration, overwrite)
     with _session(source, result, opened) as recorder:
         if frames is not None and frames <= 0:
             result.stopped = "frames"
