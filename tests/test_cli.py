@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from thermodepth import __version__
 from thermodepth.cli import app, counts_to_celsius
-from thermodepth.errors import InputError
+from thermodepth.errors import InputError, ThermodepthError
 
 EXAMPLE = Path(__file__).parents[1] / "examples" / "calibration.yaml"
 runner = CliRunner()
@@ -111,7 +111,22 @@ def test_devices_command_runs() -> None:
     result = runner.invoke(app, ["devices", "--json"])
     assert result.exit_code == 0, result.output
     listed = json.loads(result.output)
-    assert set(listed) == {"realsense", "purethermal", "video"}
+    assert set(listed) == {"realsense", "realsense_unavailable", "purethermal", "video"}
+
+
+def test_devices_says_why_realsense_cannot_be_listed(monkeypatch: pytest.MonkeyPatch) -> None:
+    from thermodepth.sources import realsense
+
+    def unavailable() -> None:
+        raise ThermodepthError("pyrealsense2 is not available (libusb-1.0.so.0: cannot open)")
+
+    monkeypatch.setattr(realsense, "import_realsense", unavailable)
+    result = runner.invoke(app, ["devices"])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines()[0] == (
+        "RealSense devices cannot be listed: pyrealsense2 is not available "
+        "(libusb-1.0.so.0: cannot open)"
+    )
 
 
 def test_record_sim_command(tmp_path: Path) -> None:
@@ -140,6 +155,10 @@ def test_record_sim_command(tmp_path: Path) -> None:
             ["--source", "sim", "--frames", "1", "--max-skew-ms", "-2"],
             "--max-skew-ms: must be >= 0",
         ),
+        (
+            ["--source", "sim", "--frames", "1", "--thermal-latency-ms", "-5"],
+            "--thermal-latency-ms: must be >= 0",
+        ),
     ],
 )
 def test_record_bad_input_is_one_line(tmp_path: Path, args: list[str], message: str) -> None:
@@ -158,4 +177,79 @@ def test_record_refuses_to_overwrite(tmp_path: Path) -> None:
     out.mkdir()
     result = runner.invoke(app, ["record", "--source", "sim", "--frames", "1", "-o", str(out)])
     assert result.exit_code == 2
-    assert f"{out}: already exists (choose another output or remove it)" in result.output
+    assert f"{out}: already exists (choose another output, or --overwrite" in result.output
+
+
+def test_record_overwrite_keeps_what_is_not_a_recording(tmp_path: Path) -> None:
+    data = tmp_path / "data"  # `record -o ~/data --overwrite`
+    data.mkdir()
+    (data / "notes.txt").write_text("keep me")
+    result = runner.invoke(
+        app, ["record", "--source", "sim", "--frames", "1", "-o", str(data), "--overwrite"]
+    )
+    assert result.exit_code == 2
+    assert f"{data}: not a thermodepth recording; --overwrite replaces recordings only" in (
+        result.output
+    )
+    assert (data / "notes.txt").read_text() == "keep me"
+
+
+def test_record_over_its_own_source_is_refused(tmp_path: Path) -> None:
+    from thermodepth.io.recording import Recording
+
+    a = tmp_path / "a.zarr"
+    assert runner.invoke(app, ["record", "-s", "sim", "--frames", "2", "-o", str(a)]).exit_code == 0
+    result = runner.invoke(
+        app, ["record", "--source", f"recording:{a}", "-o", str(a), "--overwrite"]
+    )
+    assert result.exit_code == 2
+    assert f"{a}: the source reads {a}; write the recording somewhere else" in result.output
+    assert len(list(Recording(a).pairs())) == 2
+
+
+def test_record_checks_the_output_before_opening_the_source(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import thermodepth.sources
+
+    def must_not_open(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the cameras were started before the output was checked")
+
+    monkeypatch.setattr(thermodepth.sources, "open_source", must_not_open)
+    (tmp_path / "o.zarr").mkdir()
+    result = runner.invoke(app, ["record", "-s", "lepton", "-o", str(tmp_path / "o.zarr")])
+    assert result.exit_code == 2
+    assert "already exists" in result.output
+
+
+def test_record_prints_and_stores_the_source_counters(tmp_path: Path) -> None:
+    from thermodepth.io.recording import Recording
+
+    a, b = tmp_path / "a.zarr", tmp_path / "b.zarr"
+    runner.invoke(app, ["record", "-s", "sim", "--frames", "2", "-o", str(a)])
+    result = runner.invoke(app, ["record", "-s", f"recording:{a}", "-o", str(b)])
+    assert result.exit_code == 0, result.output
+    assert "source: replay_skipped 0" in result.output
+    assert Recording(b).attrs["source_counters"] == {"replay_skipped": 0}
+
+
+def test_missing_lepton_is_one_line_without_opencv_warnings(tmp_path: Path) -> None:
+    if Path("/dev/video57").exists():
+        pytest.skip("/dev/video57 exists")
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "thermodepth.cli",
+            "record",
+            "-s",
+            "lepton:57",
+            "-o",
+            str(tmp_path / "l.zarr"),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == ["error: /dev/video57: cannot open (no such device)"]

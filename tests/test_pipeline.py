@@ -3,6 +3,7 @@ settings, outputs, and `thermodepth run` (live, recorded, replayed)."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -279,3 +280,141 @@ def test_run_without_calibration_is_one_line(tmp_path: Path) -> None:
     (tmp_path / "s.yaml").write_text("calibration: nope.yaml\n")
     res = runner.invoke(app, ["run", "--settings", str(tmp_path / "s.yaml")])
     assert res.exit_code == 2 and "nope.yaml: cannot read" in res.output
+
+
+# -- run with cameras: single streams, pairing, recording attributes -------------------------
+
+
+class SimCamera:
+    """One stream of the simulated rig as a live camera would give it (``stream``: depth or
+    thermal); the depth camera also carries the device's own depth section."""
+
+    live = True
+
+    def __init__(self, stream: str, n: int, device_depth: dict | None = None) -> None:  # type: ignore[type-arg]
+        self.name, self.stream, self.n = f"sim-{stream}", stream, n
+        self.device_depth = device_depth
+        self.closed = False
+
+    def __iter__(self):  # type: ignore[no-untyped-def]
+        from thermodepth.frames import DepthFrame, ThermalFrame
+
+        rig = Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0))
+        for i, p in enumerate(rig.frames(self.n)):
+            if self.stream == "depth":
+                yield DepthFrame(p.depth, p.depth_time_s, i)
+            else:
+                yield ThermalFrame(p.thermal, p.thermal_time_s, i, p.telemetry)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def paired_sim(n: int, device_depth: dict | None = None, max_skew_s: float = 0.02):  # type: ignore[no-untyped-def, type-arg]
+    from thermodepth.sources.paired import PairedSource
+
+    return PairedSource(
+        SimCamera("depth", n, device_depth), SimCamera("thermal", n), None, max_skew_s, 10.0
+    )
+
+
+def test_run_with_a_single_camera_is_refused_before_recording(tmp_path: Path) -> None:
+    from thermodepth.frames import DepthFrame
+    from thermodepth.io.recording import RecordingWriter
+
+    depth_only = tmp_path / "depth.zarr"
+    with RecordingWriter(depth_only) as w:
+        w.add(DepthFrame(np.zeros((720, 1280), np.uint16), 0.0, 0))
+    settings = tmp_path / "s.yaml"
+    settings.write_text(f"calibration: {Path(__file__).parents[1] / 'examples/calibration.yaml'}\n")
+    out = tmp_path / "x.zarr"
+    res = runner.invoke(
+        app,
+        [
+            "run",
+            "--source",
+            f"recording:{depth_only}",
+            "--settings",
+            str(settings),
+            "--record",
+            str(out),
+        ],
+    )
+    assert res.exit_code == 2, res.output
+    assert res.output.strip() == (
+        f"error: recording:{depth_only}: gives depth only; FramePairs need a depth and a "
+        "thermal camera (use realsense+lepton, sim or recording:PATH)"
+    )
+    assert not out.exists()
+
+
+def test_run_session_refuses_a_single_camera_and_closes_it(tmp_path: Path) -> None:
+    from thermodepth.session import run_session
+    from thermodepth.sources.paired import StreamSource
+
+    camera = SimCamera("depth", 2)
+    pipeline = Pipeline(Settings(), Rig(plate_scene(), camera_pose(1.0)).calibration)
+    with pytest.raises(InputError, match="sim-depth: gives depth only"):
+        run_session(StreamSource(camera, "depth"), pipeline, record=tmp_path / "x.zarr")
+    assert camera.closed and not (tmp_path / "x.zarr").exists()
+
+
+def test_run_prints_pairing_and_records_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, model_path: Path
+) -> None:
+    import thermodepth.sources
+    from thermodepth.io.recording import Recording
+
+    opened: dict = {}  # type: ignore[type-arg]
+
+    def open_paired_sim(spec: str, calibration: object = None, **kw: object) -> object:
+        opened.update(kw)
+        return paired_sim(3, max_skew_s=float(kw["max_skew_s"]))  # type: ignore[arg-type]
+
+    monkeypatch.setattr(thermodepth.sources, "open_source", open_paired_sim)
+    settings = tmp_path / "s.yaml"
+    cal = Path(__file__).parents[1] / "examples" / "calibration.yaml"
+    settings.write_text(f"calibration: {cal}\ncompensation: {model_path}\n")
+    res = runner.invoke(
+        app,
+        [
+            "run",
+            "--source",
+            "realsense+lepton",
+            "--settings",
+            str(settings),
+            "--quiet",
+            "--max-skew-ms",
+            "18",  # the rig's skews are at most 16.7 ms
+            "--thermal-latency-ms",
+            "12",
+            "--record",
+            str(tmp_path / "r.zarr"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    assert opened["max_skew_s"] == 0.018 and opened["thermal_latency_s"] == 0.012
+    assert "pairing: pairs 3, dropped 0 of 3 thermal frames" in res.output
+    rec = Recording(tmp_path / "r.zarr")
+    assert rec.attrs["pairing"]["pairs"] == 3 and rec.attrs["stopped"] == "end"
+    assert rec.attrs["source_counters"] == {}
+    pipeline = rec.settings["pipeline"]
+    assert pipeline["settings_yaml"] == settings.read_text()
+    assert pipeline["compensation_sha256"] == hashlib.sha256(model_path.read_bytes()).hexdigest()
+
+
+def test_replay_uses_the_recorded_device_depth_with_the_users_calibration(
+    tmp_path: Path,
+) -> None:
+    from thermodepth.calibration import Calibration
+    from thermodepth.session import record_session
+    from thermodepth.sources import open_source
+
+    user = Calibration.load(Path(__file__).parents[1] / "examples" / "calibration.yaml")
+    device = {**user.to_dict()["depth"], "cx": 641.25, "depth_scale_m": 0.00025}
+    record_session(paired_sim(2, device_depth=device), tmp_path / "d.zarr")  # no calibration
+    src = open_source(f"recording:{tmp_path / 'd.zarr'}", user)
+    assert src.calibration is not None
+    assert src.calibration.depth.cx == 641.25  # the device's ...
+    assert src.calibration.depth_scale_m == 0.00025
+    assert src.calibration.thermal == user.thermal  # ... with the user's thermal camera

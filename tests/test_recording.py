@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
-import os
+import re
 import signal
 import subprocess
 import sys
@@ -15,8 +16,18 @@ import pytest
 import zarr
 
 from thermodepth.errors import InputError
-from thermodepth.frames import DepthFrame, FfcState, FramePair, Telemetry, ThermalFrame
+from thermodepth.frames import (
+    DepthFrame,
+    FfcState,
+    FramePair,
+    Match,
+    Telemetry,
+    ThermalFrame,
+    pair_of,
+)
 from thermodepth.io.recording import (
+    TABLE_CHUNK_ROWS,
+    CorruptFrameError,
     Recorder,
     Recording,
     RecordingWarning,
@@ -101,8 +112,6 @@ def test_raw_streams_and_pairs_as_references(tmp_path: Path) -> None:
     tel = Telemetry(frame_counter=0, fpa_temp_k=300.0, housing_temp_k=299.0)
     depth = [DepthFrame(np.full((3, 4), i, np.uint16), i / 30, i) for i in range(10)]
     thermal = ThermalFrame(np.full((2, 2), 9, np.uint16), 4.1 / 30, 0, tel)
-    from thermodepth.frames import Match, pair_of
-
     with RecordingWriter(tmp_path / "r.zarr") as w:
         for d in depth[:5]:
             w.add(d)
@@ -155,44 +164,83 @@ def test_missing_chunk_is_caught_by_the_checksum(tmp_path: Path) -> None:
 
 
 KILL_SCRIPT = """
-import sys
+import os, signal, sys
+import zarr
+from thermodepth.io import recording
 from thermodepth.cli import main
-sys.argv = ["thermodepth", "record", "--source", "sim", "-o", sys.argv[1], "--frames", "100000"]
+
+out, where, at = sys.argv[1], sys.argv[2], int(sys.argv[3])
+recording.FIRST_CAPACITY = 4  # arrays grow at rows 4, 8, 16, ...
+
+
+def kill():
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+write, resize = recording._TableWriter.write, zarr.Array.resize
+
+
+def write_hook(self, row, values):
+    if self.array.path == where and row == at:
+        kill()  # depth/meta: frame `at`'s image is on disk, its meta row not; pairs: both frames
+    write(self, row, values)
+
+
+def resize_hook(self, shape):
+    if where == "resize" and self.path == "depth/meta" and shape[0] > at:
+        kill()  # mid-growth: depth/image already grown past `at`, depth/meta not
+    resize(self, shape)
+
+
+recording._TableWriter.write = write_hook
+zarr.Array.resize = resize_hook
+sys.argv = ["thermodepth", "record", "--source", "sim", "-o", out, "--frames", "100"]
 main()
 """
 
 
-def test_sigkill_mid_write_keeps_every_completed_frame(tmp_path: Path) -> None:
-    out = tmp_path / "killed.zarr"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", KILL_SCRIPT, str(out)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+def killed_recording(tmp_path: Path, where: str, at: int) -> Path:
+    """Record the simulator in a subprocess that SIGKILLs itself at a chosen point."""
+    out = tmp_path / f"killed-{where.replace('/', '-')}.zarr"
+    proc = subprocess.run(
+        [sys.executable, "-c", KILL_SCRIPT, str(out), where, str(at)],
+        capture_output=True,
+        timeout=300,
+        check=False,
     )
-    try:
-        deadline = time.monotonic() + 60
-        n = 0
-        while time.monotonic() < deadline:
-            time.sleep(0.2)
-            meta = out / "pairs" / "c"
-            n = len(list(meta.iterdir())) if meta.is_dir() else 0
-            if n >= 6:
-                break
-        assert n >= 6, "the recorder did not start writing"
-        time.sleep(0.13)  # land somewhere inside a frame's writes
-        os.kill(proc.pid, signal.SIGKILL)
-    finally:
-        proc.wait(10)
-    assert proc.returncode == -signal.SIGKILL
+    assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()
+    return out
+
+
+def array_length(store: Path, name: str) -> int:
+    return int(json.loads((store / name / "zarr.json").read_text())["shape"][0])
+
+
+@pytest.mark.parametrize(
+    ("where", "at", "frames", "pairs"),
+    [
+        ("depth/meta", 5, (5, 5), 5),  # after frame 5's image chunk, before its meta row
+        ("pairs", 5, (6, 6), 5),  # after both frames of pair 5, before the pair row
+        ("resize", 8, (8, 8), 8),  # growing to 16 rows: image arrays grown, meta not yet
+    ],
+)
+def test_sigkill_at_each_write_step_keeps_every_completed_frame(
+    tmp_path: Path, where: str, at: int, frames: tuple[int, int], pairs: int
+) -> None:
+    out = killed_recording(tmp_path, where, at)
+    if where == "depth/meta":  # the orphan image chunk is there: the kill came after it
+        assert (out / "depth" / "image" / "c" / str(at) / "0" / "0").is_file()
+    if where == "resize":  # killed between the two resizes
+        assert array_length(out, "depth/image") == 16 and array_length(out, "depth/meta") == 8
     rec = Recording(out)
     assert not rec.complete
-    assert rec.n_pairs >= 5  # the 6th pair's folder may be there before its file
-    assert rec.n_depth >= rec.n_pairs and rec.n_thermal >= rec.n_pairs
+    assert (rec.n_depth, rec.n_thermal) == frames
+    assert rec.n_pairs == pairs
     got = list(rec.pairs())
-    assert len(got) == rec.n_pairs and rec.skipped == 0
-    want = list(sim_rig().frames(len(got)))
-    assert_same_pair(want[-1], got[-1])  # the last completed frame, bit for bit
-    assert_same_pair(want[0], got[0])
+    assert len(got) == pairs and rec.skipped == 0
+    want = list(sim_rig().frames(pairs))
+    for a, b in zip(want, got, strict=True):
+        assert_same_pair(a, b)  # every completed pair, bit for bit
 
 
 def test_recorder_drops_when_the_writer_cannot_keep_up(tmp_path: Path) -> None:
@@ -203,8 +251,6 @@ def test_recorder_drops_when_the_writer_cannot_keep_up(tmp_path: Path) -> None:
 
     rec = Recorder(SlowWriter(tmp_path / "d.zarr"), block=False, max_queue=2)
     tel = Telemetry(frame_counter=0, fpa_temp_k=300.0, housing_temp_k=299.0)
-    from thermodepth.frames import Match, pair_of
-
     for i in range(20):
         d = DepthFrame(np.zeros((2, 2), np.uint16), i / 30, i)
         rec.add(d)
@@ -258,12 +304,8 @@ def test_not_a_recording(tmp_path: Path, make, message: str) -> None:  # type: i
         open_source(f"recording:{p}")
 
 
-def test_writer_refuses_existing_path_and_mismatched_frames(tmp_path: Path) -> None:
-    p = tmp_path / "w.zarr"
-    p.mkdir()
-    with pytest.raises(InputError, match="already exists"):
-        RecordingWriter(p)
-    w = RecordingWriter(p, overwrite=True)
+def test_writer_refuses_mismatched_frames(tmp_path: Path) -> None:
+    w = RecordingWriter(tmp_path / "w.zarr")
     w.add_depth(DepthFrame(np.zeros((720, 1280), np.uint16), 0.0, 0))
     with pytest.raises(
         InputError, match="depth frame 1: 640x480 differs from the recording's 1280x720"
@@ -271,3 +313,119 @@ def test_writer_refuses_existing_path_and_mismatched_frames(tmp_path: Path) -> N
         w.add_depth(DepthFrame(np.zeros((480, 640), np.uint16), 0.1, 1))
     with pytest.raises(InputError, match=r"expected \(H, W\) uint16, got \(720, 1280\) float64"):
         w.add_depth(DepthFrame(np.zeros((720, 1280)), 0.1, 1))  # type: ignore[arg-type]
+
+
+# -- overwriting ------------------------------------------------------------------------------
+
+
+def test_existing_output_is_refused_without_overwrite(tmp_path: Path) -> None:
+    p = tmp_path / "w.zarr"
+    p.mkdir()
+    with pytest.raises(InputError, match=re.escape(f"{p}: already exists (choose another")):
+        RecordingWriter(p)
+
+
+@pytest.mark.parametrize("kind", ["directory", "file", "zarr group"])
+def test_overwrite_never_deletes_what_is_not_a_recording(tmp_path: Path, kind: str) -> None:
+    p = tmp_path / "data"
+    if kind == "directory":  # `record -o ~/data --overwrite`
+        p.mkdir()
+        (p / "thesis.tex").write_text("years of work")
+    elif kind == "file":
+        p.write_text("years of work")
+    else:  # a Zarr store of someone else's
+        zarr.open_group(str(p), mode="w").attrs["format"] = "not-ours"
+    before = sorted(str(f.relative_to(tmp_path)) for f in tmp_path.rglob("*"))
+    with pytest.raises(InputError) as info:
+        RecordingWriter(p, overwrite=True)
+    assert str(info.value) == (
+        f"{p}: not a thermodepth recording; --overwrite replaces recordings only "
+        "(nothing was deleted)"
+    )
+    assert sorted(str(f.relative_to(tmp_path)) for f in tmp_path.rglob("*")) == before
+
+
+def test_overwrite_replaces_a_recording(tmp_path: Path) -> None:
+    p = tmp_path / "r.zarr"
+    record_session(SimSource(sim_rig()), p, frames=2)
+    record_session(SimSource(sim_rig()), p, frames=1, overwrite=True)
+    assert Recording(p).n_pairs == 1
+
+
+@pytest.mark.parametrize("out", ["{src}", "{src}/inside.zarr", "{tmp}"])
+def test_recording_over_its_own_source_is_refused(tmp_path: Path, out: str) -> None:
+    src = tmp_path / "a.zarr"
+    record_session(SimSource(sim_rig()), src, frames=2)
+    target = Path(out.format(src=src, tmp=tmp_path))
+    with pytest.raises(InputError, match=re.escape(f"{target}: the source reads {src}")):
+        record_session(open_source(f"recording:{src}"), target, overwrite=True)
+    rec = Recording(src)
+    assert rec.complete and rec.n_pairs == 2 and len(list(rec.pairs())) == 2  # untouched
+
+
+# -- damaged stores ---------------------------------------------------------------------------
+
+
+def test_corrupt_array_metadata_is_one_line(tmp_path: Path) -> None:
+    out = tmp_path / "j.zarr"
+    record_session(SimSource(sim_rig()), out, frames=1)
+    (out / "depth" / "meta" / "zarr.json").write_text("garbage{")
+    with pytest.raises(InputError) as info:
+        open_source(f"recording:{out}")
+    message = str(info.value)
+    assert message.startswith(f"{out}: depth/meta/zarr.json is unreadable (JSONDecodeError: ")
+    assert "\n" not in message
+
+
+def small_recording(path: Path, n: int) -> None:
+    """n pairs of tiny frames, numbered by their pixels (fast: no simulator)."""
+    tel = Telemetry(frame_counter=0, fpa_temp_k=300.0, housing_temp_k=float("nan"))
+    with RecordingWriter(path) as w:
+        for i in range(n):
+            d = DepthFrame(np.full((2, 3), i, np.uint16), i / 30, i)
+            t = ThermalFrame(np.full((2, 2), i, np.uint16), i / 30, i, tel)
+            w.add(Match(d, t, pair_of(d, t, i)))
+
+
+def test_tables_are_chunked_so_a_recording_opens_from_few_files(tmp_path: Path) -> None:
+    out = tmp_path / "t.zarr"
+    small_recording(out, TABLE_CHUNK_ROWS + 44)
+    for table in ("depth/meta", "thermal/meta", "pairs"):
+        chunks = sorted(p.parent.name for p in (out / table / "c").rglob("0") if p.is_file())
+        assert chunks == ["0", "1"], table  # 300 rows in two files, not 300
+    rec = Recording(out)
+    assert (rec.n_depth, rec.n_thermal, rec.n_pairs) == (300, 300, 300)
+    assert [int(p.depth[0, 0]) for p in rec.pairs()] == list(range(300))
+
+
+def test_corrupt_meta_chunk_is_unreadable_not_missing_one_warning(tmp_path: Path) -> None:
+    out = tmp_path / "m.zarr"
+    small_recording(out, TABLE_CHUNK_ROWS + 44)
+    chunk = out / "thermal" / "meta" / "c" / "0" / "0"  # rows 0-255
+    raw = bytearray(chunk.read_bytes())
+    raw[100] ^= 0xFF
+    chunk.write_bytes(bytes(raw))
+    lines: list[str] = []
+    src = open_source(f"recording:{out}", warn=lines.append)
+    got = list(src)
+    assert [p.index for p in got] == list(range(256, 300))
+    assert src.counters() == {"replay_skipped": 256}
+    assert lines == [
+        f"{out}: thermal/meta rows 0-255 unreadable (corrupt chunk): the frames and pairs "
+        "there are skipped"
+    ]
+    with pytest.raises(CorruptFrameError, match=r"^thermal frame 3: meta row unreadable"):
+        Recording(out, warn=lines.append).thermal_frame(3)
+
+
+def test_replaying_a_recording_with_recorder_drops_warns(tmp_path: Path) -> None:
+    out = tmp_path / "d.zarr"
+    record_session(SimSource(sim_rig()), out, frames=2)
+    attrs = zarr.open_group(str(out), mode="r+").attrs
+    attrs["recorder"] = {"dropped": {"depth": 3, "thermal": 1, "pairs": 1}}
+    lines: list[str] = []
+    assert len(list(open_source(f"recording:{out}", warn=lines.append))) == 2
+    assert lines == [
+        f"{out}: the recorder dropped 5 events while recording (depth 3, thermal 1, pairs 1): "
+        "the replay gives the pairs recorded, not every pair the live run saw"
+    ]

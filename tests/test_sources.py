@@ -4,9 +4,11 @@ UVC (a stand-in VideoCapture), device listing from sysfs."""
 from __future__ import annotations
 
 import re
-import struct
-from collections.abc import Iterator
+import threading
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,10 +18,12 @@ from thermodepth.frames import DepthFrame, FfcState, Telemetry, ThermalFrame
 from thermodepth.io.recording import Recording
 from thermodepth.session import record_session
 from thermodepth.sources import lepton as lepton_mod
-from thermodepth.sources import open_source
+from thermodepth.sources import open_source, split_spec
+from thermodepth.sources import realsense as realsense_mod
 from thermodepth.sources.base import DeviceLostError
 from thermodepth.sources.lepton import LeptonCamera, list_purethermal, list_video_devices
 from thermodepth.sources.paired import PairedSource
+from thermodepth.sources.realsense import RealSenseCamera
 from thermodepth.sources.telemetry import parse_telemetry
 
 TEL = Telemetry(frame_counter=0, fpa_temp_k=305.0, housing_temp_k=304.0)
@@ -45,74 +49,22 @@ class FakeDepth:
 
 
 class FakeThermal:
+    """8.7 fps thermal frames, optionally losing the device after ``lose_after`` frames."""
+
     name = "fake-lepton"
     live = True
 
-    def __init__(self, n: int) -> None:
-        self.n, self.closed = n, False
+    def __init__(self, n: int, lose_after: int | None = None) -> None:
+        self.n, self.lose_after, self.closed = n, lose_after, False
 
     def __iter__(self) -> Iterator[ThermalFrame]:
         for k in range(self.n):
+            if self.lose_after is not None and k == self.lose_after:
+                raise DeviceLostError(f"{self.name}: stopped delivering frames (unplugged?)")
             yield ThermalFrame(np.full((3, 4), 8000 + k, np.uint16), k / 8.7, k, TEL)
 
     def close(self) -> None:
         self.closed = True
-
-
-def test_paired_source_pairs_two_threaded_cameras() -> None:
-    depth, thermal = FakeDepth(90), FakeThermal(26)  # 3 s of each
-    # the stand-ins deliver instantly: all depth may arrive before any thermal frame
-    src = PairedSource(depth, thermal, history_s=10.0)
-    pairs = list(src)
-    assert depth.closed and thermal.closed
-    assert src.pairing is not None
-    assert src.pairing.pairs == len(pairs) >= 24
-    for p in pairs:
-        assert abs(p.skew_s) <= 0.020
-        assert p.depth[0, 0] == round((p.depth_time_s - 0.004) * 30)  # the right frame
-    assert [p.index for p in pairs] == list(range(len(pairs)))
-
-
-def test_device_lost_mid_stream_keeps_every_frame_recorded(tmp_path: Path) -> None:
-    src = PairedSource(FakeDepth(90, lose_after=45), FakeThermal(26), history_s=10.0)
-    result = record_session(src, tmp_path / "lost.zarr")
-    assert result.stopped == "device lost"
-    assert result.error == "fake-depth: stopped delivering frames (unplugged?)"
-    rec = Recording(tmp_path / "lost.zarr")
-    assert rec.complete
-    assert rec.n_depth == 45  # every depth frame delivered before the loss
-    assert rec.n_pairs == result.pairing.pairs > 0  # type: ignore[union-attr]
-    last = list(rec.pairs())[-1]
-    assert last.depth_time_s <= 0.004 + 44 / 30 + 1e-9
-    assert rec.attrs["stopped"] == "device lost"
-
-
-@pytest.mark.parametrize(
-    ("spec", "message"),
-    [
-        ("webcam", "--source: unknown 'webcam'; expected one of sim, realsense"),
-        (
-            "lepton+realsense",
-            "--source: cannot combine 'lepton+realsense'; expected realsense+lepton",
-        ),
-        ("sim:3", "--source: 'sim' takes no argument"),
-        ("recording:", "--source: recording:PATH needs a path"),
-        ("lepton:abc", "lepton:abc: expected a video device number"),
-    ],
-)
-def test_bad_specs(spec: str, message: str) -> None:
-    with pytest.raises(InputError, match=re.escape(message)):
-        open_source(spec)
-
-
-def test_sim_spec_yields_frame_pairs() -> None:
-    src = open_source("sim", frames=2)
-    pairs = list(src)
-    assert len(pairs) == 2
-    assert pairs[0].depth.shape == (720, 1280) and pairs[0].thermal.shape == (120, 160)
-
-
-# -- the Lepton over UVC ----------------------------------------------------------------------
 
 
 def telemetry_words(frame_counter: int, ffc_state: int = 3) -> np.ndarray:
@@ -156,6 +108,205 @@ def lepton_frame(k: int, ffc_state: int = 3) -> np.ndarray:
 
 def use_capture(monkeypatch: pytest.MonkeyPatch, cap: FakeCapture) -> None:
     monkeypatch.setattr(lepton_mod.cv2, "VideoCapture", lambda *a, **k: cap)
+
+
+def test_paired_source_pairs_two_threaded_cameras() -> None:
+    depth, thermal = FakeDepth(90), FakeThermal(26)  # 3 s of each
+    # the stand-ins deliver instantly: all depth may arrive before any thermal frame
+    src = PairedSource(depth, thermal, history_s=10.0)
+    pairs = list(src)
+    assert depth.closed and thermal.closed
+    assert src.pairing is not None
+    assert src.pairing.pairs == len(pairs) >= 24
+    for p in pairs:
+        assert abs(p.skew_s) <= 0.020
+        assert p.depth[0, 0] == round((p.depth_time_s - 0.004) * 30)  # the right frame
+    assert [p.index for p in pairs] == list(range(len(pairs)))
+
+
+def test_device_lost_mid_stream_keeps_every_frame_recorded(tmp_path: Path) -> None:
+    src = PairedSource(FakeDepth(90, lose_after=45), FakeThermal(26), history_s=10.0)
+    result = record_session(src, tmp_path / "lost.zarr")
+    assert result.stopped == "device lost"
+    assert result.error == "fake-depth: stopped delivering frames (unplugged?)"
+    rec = Recording(tmp_path / "lost.zarr")
+    assert rec.complete
+    assert rec.n_depth == 45  # every depth frame delivered before the loss
+    assert rec.n_pairs == result.pairing.pairs > 0  # type: ignore[union-attr]
+    last = list(rec.pairs())[-1]
+    assert last.depth_time_s <= 0.004 + 44 / 30 + 1e-9
+    assert rec.attrs["stopped"] == "device lost"
+
+
+def test_thermal_camera_lost_mid_stream_keeps_every_frame_recorded(tmp_path: Path) -> None:
+    # 40 + 10 frames and 10 pairs: the stand-ins deliver at once, and the recorder's queue
+    # (90 events) must not overflow
+    src = PairedSource(FakeDepth(40), FakeThermal(26, lose_after=10), history_s=10.0)
+    result = record_session(src, tmp_path / "lost.zarr")
+    assert result.stopped == "device lost" and result.recorder.total_dropped == 0
+    assert result.error == "fake-lepton: stopped delivering frames (unplugged?)"
+    rec = Recording(tmp_path / "lost.zarr")
+    assert rec.complete and rec.attrs["stopped"] == "device lost"
+    assert rec.attrs["error"] == result.error
+    assert rec.n_thermal == 10  # every thermal frame delivered before the loss ...
+    assert rec.n_pairs == result.pairing.pairs == 10  # type: ignore[union-attr]
+    assert [p.thermal[0, 0] for p in rec.pairs()] == [8000 + k for k in range(10)]  # ... paired
+    assert rec.n_depth >= 32  # depth up to the last thermal frame's reach (1.034 s + 20 ms)
+
+
+class LiveDepth:
+    """Depth frames every 33 ms on the host clock, until closed; notes on which thread it was
+    closed and whether that happened during a (simulated) blocking read."""
+
+    name = "live-depth"
+    live = True
+
+    def __init__(self) -> None:
+        self.closed = self.reading = self.closed_during_read = False
+        self.closed_on: threading.Thread | None = None
+
+    def __iter__(self) -> Iterator[DepthFrame]:
+        i = 0
+        while not self.closed:
+            self.reading = True
+            time.sleep(0.033)
+            self.reading = False
+            yield DepthFrame(np.zeros((6, 8), np.uint16), time.time(), i)
+            i += 1
+
+    def close(self) -> None:
+        self.closed_during_read |= self.reading
+        self.closed_on = threading.current_thread()
+        self.closed = True
+
+
+class BlockingCapture(FakeCapture):
+    """A PureThermal whose read() blocks 20 ms waiting for the next frame (OpenCV releases the
+    GIL there); notes whether it was released under a read, and on which thread."""
+
+    def __init__(self) -> None:
+        super().__init__([])
+        self.k = 0
+        self.reading = self.released_during_read = False
+        self.reads_after_release = 0
+        self.released_on: threading.Thread | None = None
+
+    def read(self) -> tuple[bool, np.ndarray | None]:
+        if self.released:
+            self.reads_after_release += 1
+            return False, None
+        self.reading = True
+        time.sleep(0.02)
+        self.reading = False
+        self.k += 1
+        return True, lepton_frame(self.k)
+
+    def release(self) -> None:
+        self.released_during_read |= self.reading
+        self.released_on = threading.current_thread()
+        super().release()
+
+
+def test_ctrl_c_closes_each_camera_on_its_reader_thread(monkeypatch: pytest.MonkeyPatch) -> None:
+    cap = BlockingCapture()
+    use_capture(monkeypatch, cap)
+    depth = LiveDepth()
+    src = PairedSource(depth, LeptonCamera(index=0), max_skew_s=0.05, history_s=10.0)
+    seen = 0
+    with pytest.raises(KeyboardInterrupt):  # Ctrl-C lands in the consumer
+        try:
+            for _pair in src:
+                seen += 1
+                if seen == 3:
+                    raise KeyboardInterrupt
+        finally:
+            src.close()  # what the sessions do on Ctrl-C
+    assert seen == 3
+    assert not any(t.is_alive() for t in src._threads)  # joined
+    main = threading.current_thread()
+    assert cap.released and cap.released_on not in (None, main)  # by the thermal reader
+    assert not cap.released_during_read and cap.reads_after_release == 0
+    assert depth.closed and depth.closed_on not in (None, main)  # by the depth reader
+    assert not depth.closed_during_read
+
+
+def test_cameras_never_read_are_closed_by_close() -> None:
+    depth, thermal = FakeDepth(3), FakeThermal(3)
+    PairedSource(depth, thermal).close()
+    assert depth.closed and thermal.closed
+
+
+def test_paired_source_counters_merge_both_cameras(monkeypatch: pytest.MonkeyPatch) -> None:
+    use_capture(monkeypatch, FakeCapture([np.zeros((122, 160), np.uint16), lepton_frame(1)]))
+    src = PairedSource(FakeDepth(3), LeptonCamera(index=0, timeout_s=0.05))
+    list(src)
+    assert src.counters() == {"thermal_bad_telemetry": 1}
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ("webcam", "--source: unknown 'webcam'; expected one of sim, realsense"),
+        (
+            "lepton+realsense",
+            "--source: cannot combine 'lepton+realsense'; expected realsense+lepton",
+        ),
+        ("sim:3", "--source: 'sim' takes no argument"),
+        ("recording:", "--source: recording:PATH needs a path"),
+        ("lepton:abc", "lepton:abc: expected a video device number"),
+        (
+            "realsense:take.db3+lepton",
+            "--source realsense:take.db3+lepton: a RealSense file cannot be paired with a live "
+            "Lepton (the file's times are not the live clock)",
+        ),
+        ("realsense:{tmp}/take+1.db3", "{tmp}/take+1.db3: no such file"),  # '+' in a path
+        ("realsense:{tmp}/a+lepton.bag", "{tmp}/a+lepton.bag: no such file"),
+    ],
+)
+def test_bad_specs(tmp_path: Path, spec: str, message: str) -> None:
+    with pytest.raises(InputError, match=re.escape(message.format(tmp=tmp_path))):
+        open_source(spec.format(tmp=tmp_path))
+
+
+@pytest.mark.parametrize(
+    ("spec", "parts"),
+    [
+        ("realsense:123+lepton:2", [("realsense", "123"), ("lepton", "2")]),
+        ("realsense+lepton", [("realsense", ""), ("lepton", "")]),
+        ("realsense:/data/take+1.db3", [("realsense", "/data/take+1.db3")]),
+        ("realsense:/data/a+lepton.db3", [("realsense", "/data/a+lepton.db3")]),
+        ("realsense:/data/a+b.db3+lepton:0", [("realsense", "/data/a+b.db3"), ("lepton", "0")]),
+        ("recording:/x/a+lepton:2", [("recording", "/x/a+lepton:2")]),
+    ],
+)
+def test_split_spec_splits_only_before_a_source_name(spec: str, parts: list) -> None:  # type: ignore[type-arg]
+    assert split_spec(spec) == parts
+
+
+def test_realsense_plus_lepton_names_every_missing_device(tmp_path: Path) -> None:
+    from thermodepth.sources import list_devices
+
+    found = list_devices()
+    if found["realsense"] or Path("/dev/video57").exists():
+        pytest.skip("a RealSense device or /dev/video57 is attached")
+    if found["realsense_unavailable"]:
+        pytest.skip("pyrealsense2 is unavailable")
+    with pytest.raises(InputError) as info:
+        open_source("realsense+lepton:57")
+    assert str(info.value) == (
+        "--source realsense+lepton:57: no RealSense device found (is it plugged in?); "
+        "/dev/video57: cannot open (no such device)"
+    )
+
+
+def test_sim_spec_yields_frame_pairs() -> None:
+    src = open_source("sim", frames=2)
+    pairs = list(src)
+    assert len(pairs) == 2
+    assert pairs[0].depth.shape == (720, 1280) and pairs[0].thermal.shape == (120, 160)
+
+
+# -- the Lepton over UVC ----------------------------------------------------------------------
 
 
 def test_lepton_frames_with_telemetry_and_ffc_flag(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -251,7 +402,71 @@ def test_no_purethermal_lists_what_was_found(tmp_path: Path) -> None:
 
 def test_lepton_telemetry_words_builder_matches_parser() -> None:
     assert parse_telemetry(telemetry_words(70000)).frame_counter == 70000
-    assert struct.pack("<H", 1) == b"\x01\x00"
+
+
+class EndlessCapture(FakeCapture):
+    """read() returns ``make(k)`` forever, one frame per 5 ms; fails the test after 3 s (a
+    camera that never gives up)."""
+
+    def __init__(self, make: Callable[[int], np.ndarray]) -> None:
+        super().__init__([])
+        self.make, self.k, self.t0 = make, 0, time.monotonic()
+
+    def read(self) -> tuple[bool, np.ndarray | None]:
+        assert time.monotonic() - self.t0 < 3.0, "the camera kept reading frames it cannot use"
+        time.sleep(0.005)
+        self.k += 1
+        return True, self.make(self.k)
+
+
+def test_lepton_without_telemetry_stops_with_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    use_capture(monkeypatch, EndlessCapture(lambda k: np.zeros((122, 160), np.uint16)))
+    cam = LeptonCamera(index=0, telemetry_timeout_s=0.2)
+    with pytest.raises(InputError) as info:
+        list(cam)
+    message = str(info.value)
+    assert message.startswith("lepton:0: no frame with valid telemetry for 0.2 s (")
+    assert message.endswith(
+        "last: telemetry: row A is all zeros (is telemetry enabled? expected 160x122 frames)); "
+        "enable the Lepton's telemetry, as a footer"
+    )
+    assert cam.bad_frames >= 10
+
+
+def test_lepton_telemetry_in_the_header_is_named(monkeypatch: pytest.MonkeyPatch) -> None:
+    def header_frame(k: int) -> np.ndarray:
+        return np.vstack([telemetry_words(k).reshape(2, 160), np.full((120, 160), 8000, np.uint16)])
+
+    use_capture(monkeypatch, EndlessCapture(header_frame))
+    with pytest.raises(
+        InputError,
+        match=re.escape(
+            "lepton:0: the telemetry rows are in the header, not the footer: open the camera "
+            "with location='header'"
+        ),
+    ):
+        list(LeptonCamera(index=0, telemetry_timeout_s=0.1))
+
+
+def test_lepton_tlinear_frames_are_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    frame = lepton_frame(0)
+    frame[121, 48] = 1  # row C word 48: TLinear on; word 49 = 0: 0.1 K per count
+    use_capture(monkeypatch, FakeCapture([frame]))
+    with pytest.raises(
+        InputError, match=r"^lepton:0: TLinear output is on \(pixels are kelvin x 10"
+    ):
+        next(iter(LeptonCamera(index=0)))
+
+
+def test_lepton_one_frame_buffer_and_latency(monkeypatch: pytest.MonkeyPatch) -> None:
+    cap = FakeCapture([lepton_frame(0)])
+    use_capture(monkeypatch, cap)
+    cam = LeptonCamera(index=0, latency_s=0.25)
+    before = time.time()
+    frame = next(iter(cam))
+    assert cap.props[lepton_mod.cv2.CAP_PROP_BUFFERSIZE] == 1
+    assert before - 0.25 <= frame.time_s <= time.time() - 0.25
+    assert cam.settings["latency_s"] == 0.25
 
 
 @pytest.mark.hardware
@@ -265,3 +480,207 @@ def test_live_lepton_frame() -> None:
         cam.close()
     assert frame.counts.shape == (120, 160)
     assert 250 < frame.telemetry.fpa_temp_k < 350
+
+
+# -- RealSense over a stand-in pyrealsense2 ---------------------------------------------------
+
+
+class RsFrame:
+    def __init__(self, number: int, pixels: np.ndarray) -> None:
+        self.number, self.pixels = number, pixels
+
+    def __bool__(self) -> bool:
+        return True
+
+    def get_frame_number(self) -> int:
+        return self.number
+
+    def get_data(self) -> np.ndarray:
+        return self.pixels
+
+    def get_timestamp(self) -> float:
+        return 1_700_000_000_000.0 + self.number * 1000 / 30
+
+    def get_frame_timestamp_domain(self) -> str:
+        return "global_time"
+
+
+class RsFrameset:
+    def __init__(self, number: int, ir: bool = True) -> None:
+        self.depth = RsFrame(number, np.full((2, 3), number, np.uint16))
+        self.ir = RsFrame(number, np.full((2, 3), 7, np.uint8)) if ir else None
+
+    def get_depth_frame(self) -> RsFrame:
+        return self.depth
+
+    def get_infrared_frame(self, index: int) -> RsFrame | None:
+        return self.ir
+
+
+class RsPipeline:
+    """Stands in for rs.pipeline: framesets from ``script`` (None: a wait that times out), then
+    ``then`` forever (default: timeouts). Each wait blocks ``wait_s``; notes on which thread it
+    was stopped and whether a wait was in progress then. Fails the test after 3 s of waits (a
+    camera that never gives up)."""
+
+    def __init__(
+        self,
+        script: list[RsFrameset | None],
+        then: RsFrameset | None = None,
+        wait_s: float = 0.002,
+        broken_sensor: bool = False,
+        ppx: float = 1.0,
+    ) -> None:
+        self.script, self.then, self.wait_s = list(script), then, wait_s
+        self.broken_sensor, self.ppx = broken_sensor, ppx
+        self.t0 = time.monotonic()
+        self.waiting = self.stopped_during_wait = False
+        self.stops: list[threading.Thread] = []
+
+    def start(self, config: object) -> object:
+        return RsProfile(self.broken_sensor, self.ppx)
+
+    def try_wait_for_frames(self, timeout_ms: int) -> tuple[bool, RsFrameset | None]:
+        assert time.monotonic() - self.t0 < 3.0, "the camera kept waiting for a new frame"
+        self.waiting = True
+        time.sleep(self.wait_s)
+        self.waiting = False
+        fs = self.script.pop(0) if self.script else self.then
+        return fs is not None, fs
+
+    def stop(self) -> None:
+        self.stopped_during_wait |= self.waiting
+        self.stops.append(threading.current_thread())
+
+
+class RsProfile:
+    def __init__(self, broken_sensor: bool = False, ppx: float = 1.0) -> None:
+        self.broken_sensor, self.ppx = broken_sensor, ppx
+
+    def get_device(self) -> RsProfile:
+        return self
+
+    def get_info(self, key: object) -> str:
+        return "000000000001"
+
+    def supports(self, key: object) -> bool:
+        return True
+
+    def first_depth_sensor(self) -> RsProfile:
+        if self.broken_sensor:
+            raise RuntimeError("failed to query the depth sensor")
+        return self
+
+    def get_depth_scale(self) -> float:
+        return 0.001
+
+    def get_stream(self, kind: object) -> RsProfile:
+        return self
+
+    def as_video_stream_profile(self) -> RsProfile:
+        return self
+
+    def get_intrinsics(self) -> SimpleNamespace:
+        return SimpleNamespace(
+            width=3, height=2, fx=2.0, fy=2.0, ppx=self.ppx, ppy=0.5, coeffs=[0.0] * 5
+        )
+
+
+def fake_pyrealsense2(pipeline: RsPipeline) -> SimpleNamespace:
+    """The part of pyrealsense2's API RealSenseCamera uses, over ``pipeline``, one device."""
+    config = SimpleNamespace(enable_device=lambda s: None, enable_stream=lambda *a: None)
+    return SimpleNamespace(
+        pipeline=lambda: pipeline,
+        config=lambda: config,
+        context=lambda: SimpleNamespace(query_devices=lambda: [RsProfile()]),
+        stream=SimpleNamespace(depth="depth", infrared="infrared"),
+        format=SimpleNamespace(z16="z16", y8="y8"),
+        timestamp_domain=SimpleNamespace(global_time="global_time", system_time="system_time"),
+        camera_info=SimpleNamespace(
+            name="name", serial_number="serial", firmware_version="fw", usb_type_descriptor="usb"
+        ),
+    )
+
+
+def live_realsense(
+    monkeypatch: pytest.MonkeyPatch, pipeline: RsPipeline, **kw: object
+) -> RealSenseCamera:
+    monkeypatch.setattr(realsense_mod, "import_realsense", lambda: fake_pyrealsense2(pipeline))
+    return RealSenseCamera(**kw)  # type: ignore[arg-type]
+
+
+def numbers_until_lost(cam: RealSenseCamera) -> list[int]:
+    got = []
+    with pytest.raises(DeviceLostError, match=r"^realsense: no new frame for 0\.1 s"):
+        for frame in cam:
+            got.append(frame.index)
+    return got
+
+
+def test_realsense_failure_after_start_stops_the_pipeline(monkeypatch: pytest.MonkeyPatch) -> None:
+    pipeline = RsPipeline([], broken_sensor=True)
+    with pytest.raises(InputError) as info:
+        live_realsense(monkeypatch, pipeline)
+    assert str(info.value) == (
+        "realsense: cannot read the stream's profile (failed to query the depth sensor)"
+    )
+    assert len(pipeline.stops) == 1
+
+
+def test_bad_device_intrinsics_stop_the_camera(monkeypatch: pytest.MonkeyPatch) -> None:
+    from thermodepth.sim.rig import default_calibration
+
+    pipeline = RsPipeline([], ppx=10.0)  # principal point outside the 3 px wide image
+    monkeypatch.setattr(realsense_mod, "import_realsense", lambda: fake_pyrealsense2(pipeline))
+    with pytest.raises(InputError, match=r"^realsense \(device depth intrinsics\): depth"):
+        open_source("realsense", default_calibration())
+    assert len(pipeline.stops) == 1
+
+
+def test_realsense_skips_repeats_and_takes_a_restarted_stream(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    script = [RsFrameset(n) for n in (10, 10, 11, 12, 3, 4, 5, 2)]
+    warned: list[str] = []
+    cam = live_realsense(monkeypatch, RsPipeline(script), timeout_s=0.1, warn=warned.append)
+    assert numbers_until_lost(cam) == [10, 11, 12, 3, 4, 5, 2]
+    assert warned == [
+        "realsense: frame number went back from 12 to 3: the stream restarted (as after a USB "
+        "reconnect); going on (counted, warned once)"
+    ]
+    assert cam.counters() == {"depth_restarts": 2}
+
+
+def test_realsense_repeating_one_frame_counts_as_lost(monkeypatch: pytest.MonkeyPatch) -> None:
+    cam = live_realsense(
+        monkeypatch, RsPipeline([RsFrameset(7)], then=RsFrameset(7)), timeout_s=0.1
+    )
+    assert numbers_until_lost(cam) == [7]
+
+
+def test_realsense_frameset_without_ir_is_skipped_and_counted(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    script = [RsFrameset(1), RsFrameset(2, ir=False), RsFrameset(3), RsFrameset(3)]
+    cam = live_realsense(monkeypatch, RsPipeline(script), timeout_s=0.1, with_ir=True)
+    frames = []
+    with pytest.raises(DeviceLostError):
+        frames.extend(cam)
+    assert [f.index for f in frames] == [1, 3]
+    assert all(f.ir is not None for f in frames)
+    assert cam.counters() == {"depth_restarts": 0, "depth_missing_ir": 1}
+
+
+def test_realsense_close_from_another_thread_waits_for_the_read(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    pipeline = RsPipeline([], then=None, wait_s=0.05)
+    cam = live_realsense(monkeypatch, pipeline, timeout_s=5.0)
+    reader = threading.Thread(target=lambda: list(cam), name="reader")
+    reader.start()
+    time.sleep(0.02)  # inside a wait
+    cam.close()
+    reader.join(2.0)
+    assert not reader.is_alive()
+    assert pipeline.stops == [reader]  # stopped once, by the reading thread ...
+    assert not pipeline.stopped_during_wait  # ... after its wait returned

@@ -75,7 +75,7 @@ def test_parse_known_row() -> None:
     assert t.frame_counter == 42
     assert t.fpa_temp_k == pytest.approx(308.15)
     assert t.fpa_temp_c == pytest.approx(35.0)
-    assert t.housing_temp_k == pytest.approx(307.15)
+    assert math.isnan(t.housing_temp_k)  # reserved on the Lepton 3
     assert t.ffc_state == FfcState.COMPLETE
     assert t.time_since_ffc_s == pytest.approx(23.456)
     assert not t.ffc_desired
@@ -120,9 +120,13 @@ def test_row_a_alone_has_no_tlinear() -> None:
     assert not t.tlinear and t.frame_counter == 42
 
 
-def test_lepton3_reserved_housing_is_nan() -> None:
-    t = parse_telemetry(words_of(telemetry_bytes(housing_ck=0)))
-    assert math.isnan(t.housing_temp_k)
+@pytest.mark.parametrize("housing_ck", [0, 30715, 65535])
+def test_lepton3_reserved_words_25_to_28_are_not_a_housing_temperature(housing_ck: int) -> None:
+    # words 25-28 are reserved on the Lepton 3 (PureThermal's telemetry_data_l3): whatever
+    # they hold, the housing temperature is unknown
+    words = words_of(telemetry_bytes(housing_ck=housing_ck))
+    words[25:29] = [11, housing_ck, 13, 14]
+    assert math.isnan(parse_telemetry(words).housing_temp_k)
 
 
 def test_last_ffc_after_now_is_unknown() -> None:
@@ -183,7 +187,7 @@ def test_round_trip(
     t = parse_telemetry(words_of(raw))
     assert t.frame_counter == frame_counter
     assert round(t.fpa_temp_k * 100) == fpa_ck
-    assert round(t.housing_temp_k * 100) == housing_ck
+    assert math.isnan(t.housing_temp_k)
     assert t.ffc_state == state and t.ffc_desired == desired
     if state != FfcState.NEVER_COMMANDED and time_ffc_ms <= time_ms:
         assert t.time_since_ffc_s == pytest.approx((time_ms - time_ffc_ms) / 1000)

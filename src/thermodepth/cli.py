@@ -534,14 +534,17 @@ def devices_cmd(
         print(json.dumps(found, indent=2))
         return
     for line in describe_devices(found):
-        console.print(line, highlight=False)
+        console.print(line, highlight=False, soft_wrap=True)
 
 
-def describe_devices(found: dict[str, list[dict[str, Any]]]) -> list[str]:
-    """Lines for ``thermodepth devices``: each device with its source spec, and a clear
-    "no ... found" for each kind missing."""
+def describe_devices(found: dict[str, Any]) -> list[str]:
+    """Lines for ``thermodepth devices``: each device with its source spec, a clear
+    "no ... found" for each kind missing, and why RealSense devices cannot be listed when
+    pyrealsense2 is unavailable."""
     lines = []
-    if found["realsense"]:
+    if found.get("realsense_unavailable"):
+        lines.append(f"RealSense devices cannot be listed: {found['realsense_unavailable']}")
+    elif found["realsense"]:
         for d in found["realsense"]:
             lines.append(
                 f"RealSense {d['name']}  serial {d['serial']}  firmware {d['firmware']}  "
@@ -566,6 +569,20 @@ def describe_devices(found: dict[str, list[dict[str, Any]]]) -> list[str]:
             + (f"; other video devices: {', '.join(others)}" if others else "")
         )
     return lines
+
+
+MAX_SKEW_HELP = "Pairing: drop pairs further apart in time, ms."
+THERMAL_LATENCY_HELP = (
+    "Lepton: subtract this from each frame's arrival time, ms (exposure to arrival; "
+    "default 0: not calibrated)."
+)
+
+
+def _check_timing(max_skew_ms: float, thermal_latency_ms: float) -> None:
+    if max_skew_ms < 0:
+        raise InputError("--max-skew-ms: must be >= 0")
+    if thermal_latency_ms < 0:
+        raise InputError("--thermal-latency-ms: must be >= 0")
 
 
 @app.command("record")
@@ -593,15 +610,16 @@ def record_cmd(
             "own depth intrinsics replace its depth section (sim and recordings keep theirs)."
         ),
     ] = None,
-    max_skew_ms: Annotated[
-        float, typer.Option(help="Pairing: drop pairs further apart in time, ms.")
-    ] = 20.0,
+    max_skew_ms: Annotated[float, typer.Option(help=MAX_SKEW_HELP)] = 20.0,
+    thermal_latency_ms: Annotated[float, typer.Option(help=THERMAL_LATENCY_HELP)] = 0.0,
     ir: Annotated[bool, typer.Option("--ir", help="Also record the infrared image.")] = False,
-    overwrite: Annotated[bool, typer.Option(help="Replace an existing recording.")] = False,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace an existing recording (nothing else is replaced).")
+    ] = False,
 ) -> None:
     """Record a source into a crash-safe Zarr v3 recording (Ctrl-C stops cleanly)."""
     from .calibration import Calibration
-    from .session import record_session
+    from .session import check_outputs, record_session
     from .sources import open_source
 
     if duration is not None and duration <= 0:
@@ -610,10 +628,17 @@ def record_cmd(
         raise InputError("--frames: must be at least 1")
     if duration is None and frames is None and source.strip() == "sim":
         raise InputError("--source sim never ends: give --frames or --duration")
-    if max_skew_ms < 0:
-        raise InputError("--max-skew-ms: must be >= 0")
+    _check_timing(max_skew_ms, thermal_latency_ms)
+    check_outputs(record=out, overwrite=overwrite)  # before any camera starts
     cal = Calibration.load(calibration) if calibration else None
-    src = open_source(source, cal, max_skew_s=max_skew_ms / 1000.0, with_ir=ir, warn=_warn_line)
+    src = open_source(
+        source,
+        cal,
+        max_skew_s=max_skew_ms / 1000.0,
+        with_ir=ir,
+        thermal_latency_s=thermal_latency_ms / 1000.0,
+        warn=_warn_line,
+    )
     with progress_bar(f"recording {src.name}", frames) as advance:
         result = record_session(
             src,
@@ -627,14 +652,22 @@ def record_cmd(
     console.print(
         f"wrote {out}: {result.recorder.summary()}; stopped: {result.stopped}", soft_wrap=True
     )
-    if result.pairing is not None:
-        console.print(f"pairing: {result.pairing.summary()}", soft_wrap=True)
+    print_source_stats(result)
     if result.error:
         raise ThermodepthError(f"{result.error}; the recording keeps every frame up to then")
 
 
 def _warn_line(message: str) -> None:
     err_console.print(f"[yellow]warning:[/yellow] {message}", highlight=False, soft_wrap=True)
+
+
+def print_source_stats(result: Any) -> None:
+    """The pairing statistics and the source's counters of a session, one line each."""
+    if result.pairing is not None:
+        console.print(f"pairing: {result.pairing.summary()}", soft_wrap=True, highlight=False)
+    if result.counters:
+        counts = ", ".join(f"{k} {v}" for k, v in result.counters.items())
+        console.print(f"source: {counts}", soft_wrap=True, highlight=False)
 
 
 # -- run ------------------------------------------------------------------------------------
@@ -660,19 +693,49 @@ def run_cmd(
         Path | None,
         typer.Option("-o", "--out", help="Write measurements.jsonl and alarms.jsonl here."),
     ] = None,
+    max_skew_ms: Annotated[float, typer.Option(help=MAX_SKEW_HELP)] = 20.0,
+    thermal_latency_ms: Annotated[float, typer.Option(help=THERMAL_LATENCY_HELP)] = 0.0,
     quiet: Annotated[bool, typer.Option(help="No line per frame.")] = False,
 ) -> None:
     """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
-    result = run(source, settings, record, frames, out, None if quiet else print_frame)
+    _check_timing(max_skew_ms, thermal_latency_ms)
+    result = run(
+        source,
+        settings,
+        record,
+        frames,
+        out,
+        None if quiet else print_frame,
+        max_skew_s=max_skew_ms / 1000.0,
+        thermal_latency_s=thermal_latency_ms / 1000.0,
+    )
     console.print(
         f"{result.frames} frames fused ({result.shutter_frames} while the shutter was "
         f"closed), {sum(e['event'] == 'alarm' for e in result.events)} alarms; "
         f"stopped: {result.stopped}"
     )
     if result.recorder is not None:
-        console.print(f"recorded to {record}: {result.recorder.summary()}")
+        console.print(f"recorded to {record}: {result.recorder.summary()}", soft_wrap=True)
+    print_source_stats(result)
     if result.error:
         raise InputError(result.error)
+
+
+def pipeline_settings(settings_path: Path | None, settings: Any) -> dict[str, Any]:
+    """What a recording made by ``run --record`` stores of the pipeline: the settings file's
+    path and text, and the compensation model's path and SHA-256."""
+    import hashlib
+
+    out: dict[str, Any] = {"settings_file": None, "settings_yaml": None}
+    if settings_path is not None:
+        out["settings_file"] = str(settings_path)
+        out["settings_yaml"] = Path(settings_path).read_text(encoding="utf-8")
+    if settings.compensation is not None:
+        out["compensation_model"] = str(settings.compensation)
+        out["compensation_sha256"] = hashlib.sha256(
+            Path(settings.compensation).read_bytes()
+        ).hexdigest()
+    return {"pipeline": out}
 
 
 def run(
@@ -682,33 +745,51 @@ def run(
     frames: int | None = None,
     out: Path | None = None,
     on_frame: Callable[[Any], None] | None = None,
+    *,
+    max_skew_s: float = 0.020,
+    thermal_latency_s: float = 0.0,
 ) -> Any:
-    """Open the source and the pipeline, then :func:`thermodepth.session.run_session`."""
+    """Check the outputs, open the source and the pipeline, then
+    :func:`thermodepth.session.run_session` (which closes the source in every case; so does
+    this function when the pipeline cannot be built)."""
     from .calibration import Calibration
     from .pipeline import Pipeline, Settings
-    from .session import run_session
+    from .session import check_outputs, run_session
     from .sources import open_source
 
     settings = Settings.load(settings_path) if settings_path else Settings()
     cal = Calibration.load(settings.calibration) if settings.calibration else None
+    check_outputs(record=record, out_dir=out)  # before any camera starts
     src = open_source(
         source_spec,
         cal,
         frames=frames,
-        warn=lambda msg: err_console.print(f"[yellow]warning:[/yellow] {msg}"),
+        max_skew_s=max_skew_s,
+        thermal_latency_s=thermal_latency_s,
+        warn=_warn_line,
     )
-    calibration = src.calibration or cal
-    if calibration is None:
-        src.close()
-        raise InputError(
-            f"--source {source_spec}: no calibration; give one in the settings (calibration: FILE)"
-        )
     try:
+        src.require_pairs()
+        calibration = src.calibration or cal
+        if calibration is None:
+            raise InputError(
+                f"--source {source_spec}: no calibration; give one in the settings "
+                "(calibration: FILE)"
+            )
         pipeline = Pipeline(settings, calibration)
+        recorded = pipeline_settings(settings_path, settings) if record else None
     except BaseException:
         src.close()
         raise
-    return run_session(src, pipeline, frames=frames, record=record, out_dir=out, on_frame=on_frame)
+    return run_session(
+        src,
+        pipeline,
+        frames=frames,
+        record=record,
+        out_dir=out,
+        on_frame=on_frame,
+        record_settings=recorded,
+    )
 
 
 def print_frame(fused: Any) -> None:

@@ -3,7 +3,7 @@
 Layout (docs/recording.md has the full description)::
 
     session.zarr/                 group; attributes: format, version, calibration, settings,
-                                  source, created_utc, complete, counts, stats
+                                  device_depth, source, created_utc, complete, counts, ...
       depth/image   (N, H, W) uint16   one chunk per frame
       depth/ir      (N, H, W) uint8    optional, one chunk per frame
       depth/meta    (N, 3)    float64  time_s, index, crc32 -- written last: commit marker
@@ -12,20 +12,23 @@ Layout (docs/recording.md has the full description)::
       pairs         (N, 3)    int64    depth row, thermal row, pair index (-1 = none)
 
 Crash safety: a frame's image chunks are written before its meta row, and a pair row only
-after both its frames; every chunk is its own file, which zarr (>= 3.1.3, zarr-python PR 3412)
+after both its frames; every chunk is a file, which zarr (>= 3.1.3, zarr-python PR 3412)
 writes to a temporary file and renames into place, so a SIGKILL leaves each file either whole
-or absent (a torn chunk from another writer would fail its checksums). A frame counts only
-when its meta row is there (not NaN) and its pixels match the CRC-32 the row holds; arrays
-grow by doubling (their shape may run ahead of the frames), and the true counts are found on
-open. So a killed recording loses at most the frames in flight. A corrupt or
-missing chunk costs its frame only: it is skipped with one warning line and counted.
+(old or new content) or absent (a torn chunk from another writer would fail its checksums).
+Image chunks hold one frame; meta and pair chunks hold :data:`TABLE_CHUNK_ROWS` rows, each
+row write rewriting its chunk whole (so a recording opens reading a few hundred files, not one
+per frame). A frame counts only when its meta row is there (not NaN) and its pixels match the
+CRC-32 the row holds; arrays grow by doubling (their shape may run ahead of the frames), and
+the true counts are found on open. So a killed recording loses at most the frames in flight.
+A corrupt or missing image chunk costs its frame only, a corrupt meta or pair chunk the rows
+it holds: each is skipped with one warning line and counted.
 
 Compression: Blosc with zstd (level 1, byte shuffle) then a CRC-32C checksum codec per chunk.
 """
 
 from __future__ import annotations
 
-import contextlib
+import json
 import os
 import queue
 import threading
@@ -54,6 +57,7 @@ from ..frames import (
     StreamEvent,
     Telemetry,
     ThermalFrame,
+    pair_of,
 )
 
 FORMAT = "thermodepth-recording"
@@ -74,6 +78,9 @@ THERMAL_META = (
 )
 PAIR_COLUMNS = ("depth_row", "thermal_row", "index")
 FIRST_CAPACITY = 64
+TABLE_CHUNK_ROWS = 256
+"""Rows per chunk of the meta and pair tables (one file each): a row write rewrites its
+chunk (at most 256 x 11 float64 = 22 KB), a corrupt chunk costs its rows."""
 
 
 class RecordingWarning(UserWarning):
@@ -81,12 +88,19 @@ class RecordingWarning(UserWarning):
 
 
 class CorruptFrameError(ThermodepthError):
-    """A recorded frame whose chunks cannot be read or do not match their checksum."""
+    """A recorded frame whose chunks cannot be read or do not match their checksum.
+    ``reported``: the cause was already warned about when the recording was opened (a table
+    chunk missing or corrupt: one warning for all the rows it held)."""
+
+    def __init__(self, message: str, reported: bool = False) -> None:
+        super().__init__(message)
+        self.reported = reported
 
 
 def compressors() -> list[Any]:
-    """Blosc zstd level 1 with byte shuffle (measured: 9 ms per 1280x720 depth frame, ratio
-    2.6 on simulated depth), then a CRC-32C of the compressed chunk."""
+    """Blosc zstd level 1 with byte shuffle (ratio 2.6 on simulated 1280x720 depth; the cost
+    of compressing a depth frame and of its whole write are measured in docs/recording.md,
+    "Throughput"), then a CRC-32C of the compressed chunk."""
     return [BloscCodec(cname="zstd", clevel=1, shuffle="shuffle"), Crc32cCodec()]
 
 
@@ -133,14 +147,50 @@ def telemetry_from_row(row: NDArray[np.float64]) -> Telemetry:
 def _array(
     group: zarr.Group, name: str, frame_shape: tuple[int, ...], dtype: Any, fill: Any
 ) -> zarr.Array:
+    """An array growing along time: images (2-D frames) one compressed frame per chunk,
+    table rows (1-D) :data:`TABLE_CHUNK_ROWS` per chunk, uncompressed; CRC-32C on every
+    chunk."""
+    image = len(frame_shape) == 2
     return group.create_array(
         name,
         shape=(FIRST_CAPACITY, *frame_shape),
-        chunks=(1, *frame_shape),
+        chunks=(1 if image else TABLE_CHUNK_ROWS, *frame_shape),
         dtype=dtype,
         fill_value=fill,
-        compressors=compressors() if len(frame_shape) == 2 else [Crc32cCodec()],
+        compressors=compressors() if image else [Crc32cCodec()],
     )
+
+
+def _grow(arrays: list[zarr.Array], row: int) -> None:
+    """Double the time extent of ``arrays`` (one ``zarr.json`` rewrite each) if ``row`` is
+    past it."""
+    capacity = arrays[-1].shape[0]
+    if row >= capacity:
+        for a in arrays:
+            a.resize((capacity * 2, *a.shape[1:]))
+
+
+class _TableWriter:
+    """Appends rows to a table array (meta or pairs), in order. The chunk being filled is
+    kept in memory and written whole at every row (rows not yet written hold the fill
+    value), so no chunk is read back; zarr renames it into place, so after a crash it holds
+    either the rows up to the previous one or up to this one."""
+
+    def __init__(self, array: zarr.Array, fill: Any) -> None:
+        self.array = array
+        self.fill = fill
+        self._chunk = np.full((array.chunks[0], *array.shape[1:]), fill, dtype=array.dtype)
+        self._start = 0
+
+    def write(self, row: int, values: NDArray[Any]) -> None:
+        rows = len(self._chunk)
+        start = row - row % rows
+        if start != self._start:
+            self._chunk.fill(self.fill)
+            self._start = start
+        self._chunk[row - start] = values
+        stop = min(start + rows, self.array.shape[0])
+        self.array[start:stop] = self._chunk[: stop - start]
 
 
 class _Stream:
@@ -162,18 +212,16 @@ class _Stream:
             self.arrays["ir"] = _array(g, "ir", shape, np.uint8, 0)
         # the meta array is created last: its presence means the stream's arrays exist
         self.arrays["meta"] = _array(g, "meta", (len(self.columns),), np.float64, np.nan)
+        self.meta = _TableWriter(self.arrays["meta"], np.nan)
         self.shape, self.with_ir = shape, with_ir
 
     def append(self, image: NDArray[Any], ir: NDArray[Any] | None, meta: list[float]) -> int:
         row = self.rows
-        capacity = self.arrays["meta"].shape[0]
-        if row >= capacity:
-            for a in self.arrays.values():
-                a.resize((capacity * 2, *a.shape[1:]))
+        _grow(list(self.arrays.values()), row)  # meta last
         self.arrays["image"][row] = image
         if ir is not None:
             self.arrays["ir"][row] = ir
-        self.arrays["meta"][row] = np.asarray(meta, dtype=np.float64)  # commit marker: last
+        self.meta.write(row, np.asarray(meta, dtype=np.float64))  # commit marker: last
         self.rows += 1
         return row
 
@@ -182,13 +230,53 @@ class _Stream:
             a.resize((self.rows, *a.shape[1:]))
 
 
+def is_recording(path: str | Path) -> bool:
+    """True when ``path`` is a thermodepth recording: a directory whose ``zarr.json`` is a
+    group carrying our format marker (read as plain JSON; nothing is opened for writing)."""
+    meta = Path(path) / "zarr.json"
+    try:
+        data = json.loads(meta.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    attrs = data.get("attributes") if isinstance(data, dict) else None
+    return isinstance(attrs, dict) and attrs.get("format") == FORMAT
+
+
+def check_output(path: str | Path, overwrite: bool = False, inputs: tuple[Path, ...] = ()) -> Path:
+    """Where a new recording may be written, or a one-line InputError: the path must not be
+    (inside) one of ``inputs`` (the files a source reads) nor contain one; it must not exist,
+    unless ``overwrite`` and it is a thermodepth recording (:func:`is_recording`) -- any
+    other file or directory is never deleted."""
+    out = Path(path)
+    target = out.resolve()
+    for inp in inputs:
+        src = Path(inp).resolve()
+        if target == src or src.is_relative_to(target) or target.is_relative_to(src):
+            raise InputError(f"{out}: the source reads {inp}; write the recording somewhere else")
+    if out.exists() or out.is_symlink():
+        if not overwrite:
+            raise InputError(
+                f"{out}: already exists (choose another output, or --overwrite to replace a "
+                "recording)"
+            )
+        if not is_recording(out):
+            raise InputError(
+                f"{out}: not a thermodepth recording; --overwrite replaces recordings only "
+                "(nothing was deleted)"
+            )
+    return out
+
+
 class RecordingWriter:
     """Append stream frames and pairs to a new recording (synchronously; see
     :class:`Recorder` for a background writer that never blocks a live source).
 
-    path: the store directory (must not exist unless ``overwrite``); calibration: stored as an
-    attribute (the depth intrinsics from the device plus the user's thermal/extrinsics);
-    settings: any JSON-able mapping (source spec, pairing threshold, ...).
+    path: the store directory (checked by :func:`check_output`: it must not exist, unless
+    ``overwrite`` and it is a recording, and must not be one of ``inputs``); calibration:
+    stored as an attribute (the depth intrinsics from the device plus the user's
+    thermal/extrinsics); settings: any JSON-able mapping (source spec, pairing threshold,
+    ...); device_depth: the depth camera's own intrinsics and depth unit (a calibration
+    file's ``depth`` section), stored whether or not a calibration is.
     """
 
     def __init__(
@@ -198,10 +286,10 @@ class RecordingWriter:
         settings: dict[str, Any] | None = None,
         source: str = "",
         overwrite: bool = False,
+        inputs: tuple[Path, ...] = (),
+        device_depth: dict[str, Any] | None = None,
     ) -> None:
-        self.path = Path(path)
-        if self.path.exists() and not overwrite:
-            raise InputError(f"{self.path}: already exists (choose another output or remove it)")
+        self.path = check_output(path, overwrite, inputs)
         try:
             self.root = zarr.open_group(str(self.path), mode="w", zarr_format=3)
         except OSError as exc:
@@ -214,12 +302,13 @@ class RecordingWriter:
                 "source": source,
                 "calibration": None if calibration is None else calibration.to_dict(),
                 "settings": settings or {},
+                "device_depth": device_depth,
                 "complete": False,
             }
         )
         self.depth = _Stream(self.root, "depth", DEPTH_META)
         self.thermal = _Stream(self.root, "thermal", THERMAL_META)
-        self.pairs: zarr.Array | None = None
+        self.pairs: _TableWriter | None = None
         self.n_pairs = 0
         self.bytes_written = 0  # uncompressed image bytes
         self._depth_rows: OrderedDict[int, int] = OrderedDict()
@@ -276,11 +365,10 @@ class RecordingWriter:
     def add_pair_rows(self, depth_row: int, thermal_row: int, index: int) -> None:
         """Write a pair as references to recorded rows (after both frames are written)."""
         if self.pairs is None:
-            self.pairs = _array(self.root, "pairs", (len(PAIR_COLUMNS),), np.int64, -1)
-        cap = self.pairs.shape[0]
-        if self.n_pairs >= cap:
-            self.pairs.resize((cap * 2, len(PAIR_COLUMNS)))
-        self.pairs[self.n_pairs] = np.array([depth_row, thermal_row, index], dtype=np.int64)
+            array = _array(self.root, "pairs", (len(PAIR_COLUMNS),), np.int64, -1)
+            self.pairs = _TableWriter(array, -1)
+        _grow([self.pairs.array], self.n_pairs)
+        self.pairs.write(self.n_pairs, np.array([depth_row, thermal_row, index], np.int64))
         self.n_pairs += 1
 
     def add_match(self, match: Match) -> None:
@@ -315,7 +403,7 @@ class RecordingWriter:
         self.depth.trim()
         self.thermal.trim()
         if self.pairs is not None:
-            self.pairs.resize((self.n_pairs, len(PAIR_COLUMNS)))
+            self.pairs.array.resize((self.n_pairs, len(PAIR_COLUMNS)))
         self.root.attrs.update(
             {
                 "complete": True,
@@ -428,10 +516,6 @@ class Recorder:
             else:
                 self.stats.dropped["pairs"] += 1
 
-    def add_pair(self, pair: FramePair) -> None:
-        """Queue a FramePair on its own (see :meth:`RecordingWriter.add_pair`)."""
-        self.add(match_of(pair))
-
     def _run(self) -> None:
         w = self.writer
         while True:
@@ -479,38 +563,104 @@ def _bounded_add(s: set[int], value: int, keep: int = 4096) -> None:
 # -- reading ----------------------------------------------------------------------------------
 
 
-def _committed_rows(
-    meta: zarr.Array, missing: Callable[[NDArray[Any]], NDArray[np.bool_]]
-) -> tuple[int, set[int]]:
-    """(frames, bad rows): frames = 1 + the last committed row; bad rows = rows below it whose
-    meta row is missing or unreadable."""
+@dataclass
+class _Table:
+    """A meta or pair table as found on open: ``rows`` up to the last committed one (rows that
+    could not be read filled like rows never written); ``missing``: rows below it never
+    written, or whose chunk file is gone; ``unreadable``: rows whose chunk is corrupt (below
+    or past the last committed row)."""
+
+    rows: NDArray[Any]
+    missing: set[int]
+    unreadable: set[int]
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def check(self, row: int, what: str) -> None:
+        """Raise CorruptFrameError (``reported``: warned about on open) if ``row`` cannot be
+        used; ``what`` names it (``"depth frame 3: meta row"``)."""
+        if row in self.unreadable:
+            raise CorruptFrameError(f"{what} unreadable (corrupt chunk)", reported=True)
+        if not 0 <= row < len(self.rows) or row in self.missing:
+            raise CorruptFrameError(f"{what} missing", reported=row in self.missing)
+
+    def problems(self) -> list[str]:
+        """One phrase per run of missing or unreadable rows below the end: ``rows 0-255
+        unreadable (corrupt chunk)``."""
+        out = []
+        for rows, why in (
+            (self.unreadable, "unreadable (corrupt chunk)"),
+            (self.missing, "missing"),
+        ):
+            for a, b in _runs(sorted(rows)):
+                out.append(f"{'row' if a == b else 'rows'} {a if a == b else f'{a}-{b}'} {why}")
+        return out
+
+
+def _runs(rows: list[int]) -> list[tuple[int, int]]:
+    """Consecutive runs of sorted integers as (first, last)."""
+    runs: list[tuple[int, int]] = []
+    for r in rows:
+        if runs and r == runs[-1][1] + 1:
+            runs[-1] = (runs[-1][0], r)
+        else:
+            runs.append((r, r))
+    return runs
+
+
+_EMPTY_TABLE = _Table(np.zeros((0, 0)), set(), set())
+
+
+def _read_table(
+    array: zarr.Array, absent: Callable[[NDArray[Any]], NDArray[np.bool_]], fill: Any
+) -> _Table:
+    """Read a meta or pair table in bulk (chunk by chunk if a chunk is corrupt). A row is
+    committed when ``absent(rows)`` is False for it; the table ends at the last committed
+    row."""
     try:
-        rows = np.asarray(meta[:])
-        bad = missing(rows)
-    except Exception:  # a corrupt meta chunk: find it row by row
-        bad_list = []
-        rows_l = []
-        for i in range(meta.shape[0]):
+        rows = np.asarray(array[:])
+        unreadable = np.zeros(len(rows), dtype=bool)
+    except Exception:  # a corrupt chunk: read around it
+        parts, flags = [], []
+        step = array.chunks[0]
+        for a in range(0, array.shape[0], step):
+            b = min(a + step, array.shape[0])
             try:
-                r = np.asarray(meta[i])
+                parts.append(np.asarray(array[a:b]))
+                flags.append(np.zeros(b - a, dtype=bool))
             except Exception:
-                r = np.full(meta.shape[1:], np.nan if meta.dtype.kind == "f" else -1)
-            rows_l.append(r)
-            bad_list.append(bool(missing(r[None])[0]))
-        rows = np.stack(rows_l) if rows_l else np.zeros((0, *meta.shape[1:]))
-        bad = np.asarray(bad_list, dtype=bool)
-    good = np.flatnonzero(~bad)
+                parts.append(np.full((b - a, *array.shape[1:]), fill, dtype=array.dtype))
+                flags.append(np.ones(b - a, dtype=bool))
+        rows = np.concatenate(parts) if parts else np.zeros((0, *array.shape[1:]), array.dtype)
+        unreadable = np.concatenate(flags) if flags else np.zeros(0, dtype=bool)
+    missing = absent(rows) & ~unreadable
+    good = np.flatnonzero(~(missing | unreadable))
     n = int(good[-1]) + 1 if good.size else 0
-    return n, {int(i) for i in np.flatnonzero(bad[:n])}
+    return _Table(
+        rows[:n],
+        {int(i) for i in np.flatnonzero(missing[:n])},
+        {int(i) for i in np.flatnonzero(unreadable)},
+    )
+
+
+def _nan_rows(rows: NDArray[Any]) -> NDArray[np.bool_]:
+    return np.isnan(rows[:, 0])
+
+
+def _negative_rows(rows: NDArray[Any]) -> NDArray[np.bool_]:
+    return rows[:, 0] < 0
 
 
 class Recording:
     """A recording opened for reading.
 
     Counts are those of the frames fully written (found from the commit markers, so a killed
-    recording opens with every completed frame). ``pairs()`` yields the recorded FramePairs
-    bit for bit; a frame that cannot be read is skipped with one warning (``warn``, default
-    :class:`RecordingWarning`) and counted in ``skipped``.
+    recording opens with every completed frame); the meta and pair tables are read once, in
+    bulk, on open. ``pairs()`` yields the recorded FramePairs bit for bit; a frame that cannot
+    be read is skipped with one warning (``warn``, default :class:`RecordingWarning`) and
+    counted in ``skipped``. Unreadable array metadata (a corrupt ``zarr.json``) is a one-line
+    InputError naming the array.
     """
 
     def __init__(self, path: str | Path, warn: Callable[[str], None] | None = None) -> None:
@@ -521,8 +671,7 @@ class Recording:
             self.root = zarr.open_group(str(self.path), mode="r", zarr_format=3)
             attrs = dict(self.root.attrs)
         except Exception as exc:
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise InputError(f"{self.path}: not a readable Zarr v3 store ({first})") from None
+            raise InputError(f"{self.path}: not a readable Zarr v3 store ({_first(exc)})") from None
         if attrs.get("format") != FORMAT:
             raise InputError(f"{self.path}: not a thermodepth recording (no format attribute)")
         if attrs.get("version") != VERSION:
@@ -534,32 +683,50 @@ class Recording:
         self.warn = warn or (lambda msg: warnings.warn(msg, RecordingWarning, stacklevel=3))
         self.skipped = 0
         self._arrays: dict[str, zarr.Array] = {}
-        for name in ("depth/image", "depth/ir", "depth/meta", "thermal/image", "thermal/meta"):
-            with contextlib.suppress(KeyError):
-                self._arrays[name] = self.root[name]  # type: ignore[assignment]
-        pairs = self.root.get("pairs")
-        nan_missing = lambda r: np.isnan(r[:, 0])  # noqa: E731
-        self.n_depth, self._bad_depth = (
-            _committed_rows(self._arrays["depth/meta"], nan_missing)
-            if "depth/meta" in self._arrays
-            else (0, set())
-        )
-        self.n_thermal, self._bad_thermal = (
-            _committed_rows(self._arrays["thermal/meta"], nan_missing)
-            if "thermal/meta" in self._arrays
-            else (0, set())
-        )
-        self._pairs = pairs if isinstance(pairs, zarr.Array) else None
-        self.n_pairs, self._bad_pairs = (
-            _committed_rows(self._pairs, lambda r: r[:, 0] < 0)
-            if self._pairs is not None
-            else (0, set())
+        for name in (
+            "depth/image",
+            "depth/ir",
+            "depth/meta",
+            "thermal/image",
+            "thermal/meta",
+            "pairs",
+        ):
+            try:
+                node = self.root[name]
+            except KeyError:
+                continue
+            except Exception as exc:
+                raise InputError(
+                    f"{self.path}: {name}/zarr.json is unreadable ({_short(exc)})"
+                ) from None
+            if isinstance(node, zarr.Array):
+                self._arrays[name] = node
+        self._depth = self._table("depth/meta", _nan_rows, np.nan)
+        self._thermal = self._table("thermal/meta", _nan_rows, np.nan)
+        self._pairs = self._table("pairs", _negative_rows, -1)
+        for name, table in (
+            ("depth/meta", self._depth),
+            ("thermal/meta", self._thermal),
+            ("pairs", self._pairs),
+        ):
+            for problem in table.problems():
+                self.warn(f"{self.path}: {name} {problem}: the frames and pairs there are skipped")
+        self.n_depth, self.n_thermal, self.n_pairs = (
+            len(self._depth),
+            len(self._thermal),
+            len(self._pairs),
         )
         self.calibration = (
             Calibration.from_dict(attrs["calibration"], source=f"{self.path} (calibration)")
             if attrs.get("calibration")
             else None
         )
+
+    def _table(
+        self, name: str, absent: Callable[[NDArray[Any]], NDArray[np.bool_]], fill: Any
+    ) -> _Table:
+        array = self._arrays.get(name)
+        return _EMPTY_TABLE if array is None else _read_table(array, absent, fill)
 
     @property
     def complete(self) -> bool:
@@ -572,15 +739,29 @@ class Recording:
         return dict(settings) if isinstance(settings, dict) else {}
 
     @property
+    def device_depth(self) -> dict[str, Any] | None:
+        """The depth camera's own intrinsics and depth unit (a calibration file's ``depth``
+        section), when the recording holds them."""
+        value = self.attrs.get("device_depth")
+        return dict(value) if isinstance(value, dict) else None
+
+    @property
+    def dropped(self) -> dict[str, int]:
+        """Events the recorder dropped while recording (depth, thermal, pairs); empty when the
+        recording was not closed (the counts are stored on close)."""
+        recorder = self.attrs.get("recorder")
+        value = recorder.get("dropped") if isinstance(recorder, dict) else None
+        return {str(k): int(v) for k, v in value.items()} if isinstance(value, dict) else {}
+
+    @property
     def with_ir(self) -> bool:
         return "depth/ir" in self._arrays
 
     def depth_frame(self, row: int) -> DepthFrame:
         """The depth frame at ``row``; CorruptFrameError if it cannot be read or fails its CRC."""
-        if not 0 <= row < self.n_depth or row in self._bad_depth:
-            raise CorruptFrameError(f"depth frame {row}: missing")
+        self._depth.check(row, f"depth frame {row}: meta row")
+        meta = self._depth.rows[row]
         try:
-            meta = np.asarray(self._arrays["depth/meta"][row])
             depth = np.asarray(self._arrays["depth/image"][row])
             ir = np.asarray(self._arrays["depth/ir"][row]) if self.with_ir else None
         except Exception as exc:
@@ -593,10 +774,9 @@ class Recording:
 
     def thermal_frame(self, row: int) -> ThermalFrame:
         """The thermal frame at ``row`` with its telemetry; CorruptFrameError as depth_frame."""
-        if not 0 <= row < self.n_thermal or row in self._bad_thermal:
-            raise CorruptFrameError(f"thermal frame {row}: missing")
+        self._thermal.check(row, f"thermal frame {row}: meta row")
+        meta = self._thermal.rows[row]
         try:
-            meta = np.asarray(self._arrays["thermal/meta"][row])
             counts = np.asarray(self._arrays["thermal/image"][row])
         except Exception as exc:
             raise CorruptFrameError(
@@ -608,39 +788,23 @@ class Recording:
 
     def matches(self) -> Iterator[Match]:
         """Every recorded pair with its frames, in order; unreadable ones skipped and
-        counted (one warning line each)."""
-        if self._pairs is None or self.n_pairs == 0:
-            return
-        try:
-            table = np.asarray(self._pairs[: self.n_pairs])
-        except Exception:
-            table = np.stack([self._pair_row(i) for i in range(self.n_pairs)])
-        for i, (d_row, t_row, index) in enumerate(table.tolist()):
+        counted (one warning line each, or one per table chunk warned about on open)."""
+        for i, (d_row, t_row, index) in enumerate(self._pairs.rows.tolist()):
             try:
-                if i in self._bad_pairs or d_row < 0:
-                    raise CorruptFrameError("pair row missing")
+                self._pairs.check(i, "pair row")
                 d = self.depth_frame(int(d_row))
                 t = self.thermal_frame(int(t_row))
             except CorruptFrameError as exc:
                 self.skipped += 1
-                self.warn(f"{self.path}: pair {i} skipped: {exc}")
+                if not exc.reported:
+                    self.warn(f"{self.path}: pair {i} skipped: {exc}")
                 continue
-            yield Match(
-                d,
-                t,
-                FramePair(d.depth, t.counts, d.time_s, t.time_s, t.telemetry, int(index), d.ir),
-            )
+            yield Match(d, t, pair_of(d, t, int(index)))
 
     def pairs(self) -> Iterator[FramePair]:
         """The recorded FramePairs, bit for bit (see :meth:`matches`)."""
         for m in self.matches():
             yield m.pair
-
-    def _pair_row(self, i: int) -> NDArray[np.int64]:
-        try:
-            return np.asarray(self._pairs[i])  # type: ignore[index]
-        except Exception:
-            return np.full(len(PAIR_COLUMNS), -1, dtype=np.int64)
 
     def summary(self) -> str:
         state = "complete" if self.complete else "not closed (recorder stopped abruptly)"
@@ -648,6 +812,11 @@ class Recording:
             f"{self.path}: {self.n_pairs} pairs, {self.n_depth} depth and {self.n_thermal} "
             f"thermal frames, {state}"
         )
+
+
+def _first(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
 
 
 def _short(exc: BaseException) -> str:

@@ -3,7 +3,10 @@ events (stream frames as they arrive, pairs as they form) that recorders consume
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from ..calibration import Calibration
@@ -25,7 +28,11 @@ class Source:
     stores. ``streams`` says which of "depth" and "thermal" the source has; ``live`` is True
     for cameras (a recorder must then drop rather than block); ``calibration`` is what the
     source knows (the device's depth intrinsics merged into the user's file, or the
-    recording's); ``pairing`` holds pairing statistics where the source pairs in time.
+    recording's); ``pairing`` holds pairing statistics where the source pairs in time;
+    ``files`` are the files or directories it reads (a recording must not be written over
+    them); ``device_depth`` is the depth camera's own intrinsics and depth unit as a
+    calibration file's ``depth`` section (pixels, metres per count), where the source knows
+    them. ``counters()`` counts what the source skipped (frames without telemetry, ...).
     Use it as a context manager or call ``close()``.
     """
 
@@ -34,17 +41,23 @@ class Source:
     streams: frozenset[str] = frozenset({"depth", "thermal"})
     calibration: Calibration | None = None
     pairing: PairingStats | None = None
+    files: tuple[Path, ...] = ()
+    device_depth: dict[str, Any] | None = None
 
     def events(self) -> Iterator[StreamEvent]:
         raise NotImplementedError
 
-    def __iter__(self) -> Iterator[FramePair]:
+    def require_pairs(self) -> None:
+        """Raise a one-line InputError unless the source has both streams (can give pairs)."""
         if self.streams != {"depth", "thermal"}:
             have = " and ".join(sorted(self.streams)) or "nothing"
             raise InputError(
                 f"{self.name}: gives {have} only; FramePairs need a depth and a thermal camera "
                 "(use realsense+lepton, sim or recording:PATH)"
             )
+
+    def __iter__(self) -> Iterator[FramePair]:
+        self.require_pairs()
         for event in self.events():
             if isinstance(event, Match):
                 yield event.pair
@@ -55,6 +68,10 @@ class Source:
     def settings(self) -> dict[str, Any]:
         """What to store with a recording of this source."""
         return {"source": self.name}
+
+    def counters(self) -> dict[str, int]:
+        """What the source skipped so far, by name (e.g. ``thermal_bad_telemetry``)."""
+        return {}
 
     def __enter__(self) -> Source:
         return self
@@ -70,3 +87,57 @@ def event_time_s(event: StreamEvent) -> float:
     if isinstance(event, DepthFrame | ThermalFrame):
         return event.time_s
     raise TypeError(type(event))
+
+
+def with_device_depth(
+    user: Calibration | None, device_depth: dict[str, Any] | None, where: str
+) -> Calibration | None:
+    """The user's calibration with its depth section replaced by the device's (``None`` when
+    either is missing). The thermal intrinsics and ``thermal_from_depth`` come from the user's
+    file; a depth image size that differs from the file's is allowed (the device's wins: it
+    describes the stream actually delivered). ``where`` names the device in errors."""
+    if user is None or device_depth is None:
+        return None
+    return Calibration.from_dict({**user.to_dict(), "depth": device_depth}, source=where)
+
+
+class DeviceGuard:
+    """Releases a device exactly once, and never while a read is in progress on it.
+
+    The thread that reads the device wraps each blocking read in ``with guard.reading() as
+    open_:`` (``open_`` False: the device was closed, stop reading) and calls ``release()``
+    when it stops. ``close()`` may come from any thread (Ctrl-C, the other camera lost): it
+    marks the device closed and releases it at once unless a read is in progress, in which
+    case the reader releases it as soon as its read returns. (OpenCV and librealsense release
+    the GIL in their blocking reads: releasing the device under a read is a use-after-free.)
+    """
+
+    def __init__(self, release: Callable[[], None]) -> None:
+        self._release = release
+        self._lock = threading.Lock()
+        self.closed = False
+        self.released = False
+
+    @contextmanager
+    def reading(self) -> Iterator[bool]:
+        with self._lock:
+            yield not self.closed
+
+    def close(self) -> None:
+        self.closed = True
+        if self._lock.acquire(blocking=False):
+            try:
+                self._release_once()
+            finally:
+                self._lock.release()
+
+    def release(self) -> None:
+        """Release now (from the reading thread, or when nothing reads the device)."""
+        self.closed = True
+        with self._lock:
+            self._release_once()
+
+    def _release_once(self) -> None:
+        if not self.released:
+            self.released = True
+            self._release()

@@ -6,7 +6,8 @@ from __future__ import annotations
 import contextlib
 import queue
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any, Protocol
 
 from ..calibration import Calibration
@@ -16,7 +17,9 @@ from .pairing import DEFAULT_MAX_SKEW_S, StreamPairer
 
 
 class Camera(Protocol):
-    """A single-stream device: iterate its frames, then close it."""
+    """A single-stream device: iterate its frames, then close it. Optional attributes the
+    sources use: ``live``, ``settings`` (a mapping), ``counters()``, ``device_depth``,
+    ``path`` (a file played back)."""
 
     name: str
 
@@ -26,6 +29,16 @@ class Camera(Protocol):
 
 
 _END = object()
+
+
+def _camera_counters(camera: Camera) -> dict[str, int]:
+    counters = getattr(camera, "counters", None)
+    return dict(counters()) if callable(counters) else {}
+
+
+def _camera_files(camera: Camera) -> tuple[Path, ...]:
+    path = getattr(camera, "path", None)
+    return (Path(path),) if path is not None else ()
 
 
 class StreamSource(Source):
@@ -38,6 +51,8 @@ class StreamSource(Source):
         self.streams = frozenset({stream})
         self.live = bool(getattr(camera, "live", False))
         self.calibration = calibration
+        self.files = _camera_files(camera)
+        self.device_depth = getattr(camera, "device_depth", None)
 
     def events(self) -> Iterator[StreamEvent]:
         yield from self.camera
@@ -47,6 +62,9 @@ class StreamSource(Source):
 
     def settings(self) -> dict[str, Any]:
         return {"source": self.name, **getattr(self.camera, "settings", {})}
+
+    def counters(self) -> dict[str, int]:
+        return _camera_counters(self.camera)
 
 
 class PairedSource(Source):
@@ -60,6 +78,12 @@ class PairedSource(Source):
     device's error is raised after every frame up to then has been yielded (a recorder
     attached keeps them all). history_s: depth kept before the first thermal frame arrives
     (see :class:`StreamPairer`).
+
+    Closing (``close()``, from the consumer's thread: the end, Ctrl-C, a lost device) only
+    tells the reader threads to stop and waits up to ``join_timeout_s`` for each; every
+    reader closes its own camera on its own thread when it stops, so a camera is never
+    released under a blocking read. A reader still inside a read after the timeout closes its
+    camera when that read returns.
     """
 
     def __init__(
@@ -69,33 +93,49 @@ class PairedSource(Source):
         calibration: Calibration | None = None,
         max_skew_s: float = DEFAULT_MAX_SKEW_S,
         history_s: float = 2.0,
+        join_timeout_s: float = 3.0,
     ) -> None:
         self.depth_camera = depth
         self.thermal_camera = thermal
         self.name = f"{depth.name}+{thermal.name}"
         self.live = bool(getattr(depth, "live", False) or getattr(thermal, "live", False))
         self.calibration = calibration
+        self.files = _camera_files(depth) + _camera_files(thermal)
+        self.device_depth = getattr(depth, "device_depth", None)
         self.pairer = StreamPairer(max_skew_s, history_s)
         self.pairing = self.pairer.stats
+        self.join_timeout_s = join_timeout_s
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=256)
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
 
-    def _reader(self, key: str, camera: Iterable[Any]) -> None:
+    def _offer(self, item: Any) -> bool:
+        """Queue an item for the consumer; False (not queued) once the source is stopping."""
+        while not self._stop.is_set():
+            try:
+                self._queue.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _reader(self, key: str, camera: Camera) -> None:
         try:
             for frame in camera:
-                if self._stop.is_set():
+                if self._stop.is_set() or not self._offer(frame):
                     break
-                self._queue.put(frame)
-            self._queue.put((key, _END))
+            self._offer((key, _END))
         except BaseException as exc:  # handed to the consumer
-            self._queue.put((key, exc))
+            self._offer((key, exc))
+        finally:
+            with contextlib.suppress(Exception):  # closing a lost device may fail
+                camera.close()
 
     def events(self) -> Iterator[StreamEvent]:
         for key, cam in (("depth", self.depth_camera), ("thermal", self.thermal_camera)):
             t = threading.Thread(target=self._reader, args=(key, cam), daemon=True, name=key)
-            t.start()
             self._threads.append(t)
+            t.start()
         error: BaseException | None = None
         last = {"depth": float("-inf"), "thermal": float("-inf")}
         limit = float("inf")  # once a stream has ended: the last time a pair can use
@@ -125,15 +165,17 @@ class PairedSource(Source):
             raise error
 
     def close(self) -> None:
+        """Stop the readers and wait for them (see the class docstring); cameras that were
+        never read are closed here."""
         self._stop.set()
-        for cam in (self.depth_camera, self.thermal_camera):
-            with contextlib.suppress(Exception):  # closing a lost device may fail
-                cam.close()
-        while True:  # unblock readers waiting on a full queue
-            try:
-                self._queue.get_nowait()
-            except queue.Empty:
-                break
+        if not self._threads:
+            for cam in (self.depth_camera, self.thermal_camera):
+                with contextlib.suppress(Exception):
+                    cam.close()
+            return
+        for t in self._threads:
+            if t is not threading.current_thread():
+                t.join(self.join_timeout_s)
 
     def settings(self) -> dict[str, Any]:
         return {
@@ -142,6 +184,9 @@ class PairedSource(Source):
             "depth": getattr(self.depth_camera, "settings", {}),
             "thermal": getattr(self.thermal_camera, "settings", {}),
         }
+
+    def counters(self) -> dict[str, int]:
+        return {**_camera_counters(self.depth_camera), **_camera_counters(self.thermal_camera)}
 
 
 __all__ = ["Camera", "DeviceLostError", "PairedSource", "StreamSource"]

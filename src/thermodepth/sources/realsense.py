@@ -6,7 +6,8 @@ imager (Y8, same size, pixel-aligned with depth). Files: librealsense recordings
 played back as fast as they are read (non-real-time: no frame is skipped).
 
 At the edge: the device's depth intrinsics and depth unit (metres per Z16 count) go into the
-calibration (:func:`depth_calibration`); frame timestamps in milliseconds become seconds.
+calibration (:func:`depth_section`, :func:`~.base.with_device_depth`) and, always, into
+recordings (``device_depth``); frame timestamps in milliseconds become seconds.
 Live frames carry librealsense's global time (host clock, ms since the epoch), which is the
 clock the Lepton source stamps its frames with (``time.time()``); frames of a hardware clock
 domain are stamped with their host arrival time instead.
@@ -16,17 +17,18 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Iterator
+import warnings
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..calibration import Calibration
+from ..calibration import _camera_dict as camera_dict
 from ..camera import Intrinsics
 from ..errors import InputError, ThermodepthError
 from ..frames import DepthFrame
-from .base import DeviceLostError
+from .base import DeviceGuard, DeviceLostError
 
 DEPTH_SIZE = (1280, 720)
 DEPTH_FPS = 30
@@ -61,14 +63,10 @@ def intrinsics_from_rs(intr: Any) -> Intrinsics:
     )
 
 
-def depth_calibration(user: Calibration, depth: Intrinsics, depth_scale_m: float) -> Calibration:
-    """The user's calibration with the device's depth intrinsics and depth unit.
-
-    The thermal intrinsics and ``thermal_from_depth`` come from the user's file; a depth image
-    size that differs from the file's is allowed (the device's wins), since the depth section
-    describes the stream actually recorded.
-    """
-    return Calibration(depth, user.thermal, float(depth_scale_m), user.thermal_from_depth)
+def depth_section(depth: Intrinsics, depth_scale_m: float) -> dict[str, Any]:
+    """The device's depth intrinsics (pixels) and depth unit (metres per Z16 count) as a
+    calibration file's ``depth`` section (see :func:`~.base.with_device_depth`)."""
+    return {**camera_dict(depth), "depth_scale_m": float(depth_scale_m)}
 
 
 def _describe(profile: Any) -> str:
@@ -93,8 +91,19 @@ class RealSenseCamera:
     serial: pick a device (default: the first); path: play a ``.bag`` / ``.db3`` file instead;
     size / fps: the depth mode expected (1280x720 at 30 by default; a file whose depth stream
     differs is refused with both named); with_ir: also read the left infrared imager;
-    timeout_s: a live camera silent this long counts as unplugged.
-    After opening: ``intrinsics`` (depth), ``depth_scale_m``, ``serial``, ``live``.
+    timeout_s: a live camera that delivers no new frame for this long counts as unplugged;
+    warn: where the one warning about a restarted stream goes (default: ``warnings.warn``).
+    After opening: ``intrinsics`` (depth), ``depth_scale_m``, ``serial``, ``live``,
+    ``device_depth``. Anything failing after the pipeline started stops it again and raises
+    a one-line InputError.
+
+    Iterating yields each new depth frame once: a frameset repeating the last frame number
+    (the pipeline's syncer does so when only the IR image is new) is skipped; a frame number
+    lower than the last means the stream restarted (librealsense restarts the pipeline after
+    a USB reconnect): it is taken, warned about once and counted (``restarts``). With
+    ``with_ir``, a frameset without an IR image is skipped and counted (``missing_ir``); the
+    depth frame is taken if a later frameset brings it with its IR image.
+    ``close()`` may be called from any thread (see :class:`~.base.DeviceGuard`).
     """
 
     def __init__(
@@ -105,70 +114,95 @@ class RealSenseCamera:
         fps: int = DEPTH_FPS,
         with_ir: bool = False,
         timeout_s: float = 5.0,
+        warn: Callable[[str], None] | None = None,
     ) -> None:
         rs = self.rs = import_realsense()
         self.size, self.fps, self.with_ir, self.timeout_s = size, fps, with_ir, timeout_s
+        self.warn = warn or (lambda msg: warnings.warn(msg, stacklevel=2))
         self.path = None if path is None else Path(path)
         self.live = self.path is None
+        self.restarts = 0
+        self.missing_ir = 0
+        self._last_number = -1
         self.pipeline = rs.pipeline()
+        self.name = f"realsense:{self.path}" if self.path is not None else "realsense"
+        profile = self._start_live(serial) if self.path is None else self._start_file(self.path)
+        try:
+            self._describe(profile)
+        except BaseException as exc:
+            with contextlib.suppress(RuntimeError):
+                self.pipeline.stop()
+            if isinstance(exc, RuntimeError):
+                raise InputError(f"{self.name}: cannot read the stream's profile ({exc})") from None
+            raise
+        self._guard = DeviceGuard(self._stop)
+
+    def _start_file(self, path: Path) -> Any:
+        if path.suffix.lower() not in PLAYBACK_EXTENSIONS:
+            raise InputError(
+                f"{path}: expected a RealSense recording (.bag or .db3), "
+                f"got {path.suffix or 'no extension'}"
+            )
+        if not path.is_file():
+            raise InputError(f"{path}: no such file")
+        config = self.rs.config()
+        config.enable_device_from_file(str(path), repeat_playback=False)
+        try:
+            return self.pipeline.start(config)
+        except RuntimeError as exc:
+            raise InputError(f"{path}: cannot play this file ({exc})") from None
+
+    def _start_live(self, serial: str | None) -> Any:
+        rs = self.rs
+        attached = list_realsense()
+        if not attached:
+            raise InputError("no RealSense device found (is it plugged in?)")
+        if serial and serial not in [d["serial"] for d in attached]:
+            there = ", ".join(f"{d['name']} {d['serial']}" for d in attached)
+            raise InputError(f"no RealSense device with serial {serial} (found: {there})")
         config = rs.config()
-        w, h = size
+        if serial:
+            config.enable_device(serial)
+            self.name = f"realsense:{serial}"
+        (w, h), fps = self.size, self.fps
+        config.enable_stream(rs.stream.depth, w, h, rs.format.z16, fps)
+        if self.with_ir:
+            config.enable_stream(rs.stream.infrared, 1, w, h, rs.format.y8, fps)
+        try:
+            return self.pipeline.start(config)
+        except RuntimeError as exc:
+            raise InputError(
+                f"RealSense {serial or attached[0]['serial']}: cannot stream depth {w}x{h} Z16 "
+                f"at {fps} fps{' + IR Y8' if self.with_ir else ''} ({exc}); expected a "
+                "D435-class camera on USB 3"
+            ) from None
+
+    def _describe(self, profile: Any) -> None:
+        """Check a file's streams; read the serial, depth intrinsics and depth unit."""
+        rs = self.rs
+        (w, h), fps = self.size, self.fps
+        device = profile.get_device()
         if self.path is not None:
-            self.name = f"realsense:{self.path}"
-            if self.path.suffix.lower() not in PLAYBACK_EXTENSIONS:
-                raise InputError(
-                    f"{self.path}: expected a RealSense recording (.bag or .db3), "
-                    f"got {self.path.suffix or 'no extension'}"
-                )
-            if not self.path.is_file():
-                raise InputError(f"{self.path}: no such file")
-            config.enable_device_from_file(str(self.path), repeat_playback=False)
-            try:
-                profile = self.pipeline.start(config)
-            except RuntimeError as exc:
-                raise InputError(f"{self.path}: cannot play this file ({exc})") from None
-            self._playback = profile.get_device().as_playback()
+            self._playback = device.as_playback()
             self._playback.set_real_time(False)
             streams = list(profile.get_streams())
             depth = [s for s in streams if s.stream_type() == rs.stream.depth]
             if not depth:
-                self.pipeline.stop()
                 found = ", ".join(_describe(s) for s in streams) or "no video streams"
                 raise InputError(f"{self.path}: no depth stream in this recording (found {found})")
             vp = depth[0].as_video_stream_profile()
-            got = (vp.width(), vp.height(), depth[0].format())
-            if got != (w, h, rs.format.z16):
-                self.pipeline.stop()
+            if (vp.width(), vp.height(), depth[0].format()) != (w, h, rs.format.z16):
                 raise InputError(
                     f"{self.path}: expected depth {w}x{h} Z16, found {_describe(depth[0])}"
                 )
-            self.with_ir = with_ir and any(s.stream_type() == rs.stream.infrared for s in streams)
-            self.serial = profile.get_device().get_info(rs.camera_info.serial_number)
-        else:
-            attached = list_realsense()
-            if not attached:
-                raise InputError("no RealSense device found (is it plugged in?)")
-            if serial and serial not in [d["serial"] for d in attached]:
-                there = ", ".join(f"{d['name']} {d['serial']}" for d in attached)
-                raise InputError(f"no RealSense device with serial {serial} (found: {there})")
-            if serial:
-                config.enable_device(serial)
-            config.enable_stream(rs.stream.depth, w, h, rs.format.z16, fps)
-            if with_ir:
-                config.enable_stream(rs.stream.infrared, 1, w, h, rs.format.y8, fps)
-            try:
-                profile = self.pipeline.start(config)
-            except RuntimeError as exc:
-                raise InputError(
-                    f"RealSense {serial or attached[0]['serial']}: cannot stream depth {w}x{h} Z16 "
-                    f"at {fps} fps{' + IR Y8' if with_ir else ''} ({exc}); expected a D435-class "
-                    "camera on USB 3"
-                ) from None
-            self.serial = profile.get_device().get_info(rs.camera_info.serial_number)
-            self.name = f"realsense:{self.serial}" if serial else "realsense"
+            self.with_ir = self.with_ir and any(
+                s.stream_type() == rs.stream.infrared for s in streams
+            )
+        self.serial = device.get_info(rs.camera_info.serial_number)
         dp = profile.get_stream(rs.stream.depth).as_video_stream_profile()
         self.intrinsics = intrinsics_from_rs(dp.get_intrinsics())
-        self.depth_scale_m = float(profile.get_device().first_depth_sensor().get_depth_scale())
+        self.depth_scale_m = float(device.first_depth_sensor().get_depth_scale())
+        self.device_depth = depth_section(self.intrinsics, self.depth_scale_m)
         self.settings = {
             "serial": self.serial,
             "depth": f"{w}x{h} Z16 at {fps} fps",
@@ -176,64 +210,90 @@ class RealSenseCamera:
             "depth_scale_m": self.depth_scale_m,
             **({"file": str(self.path)} if self.path else {}),
         }
-        self._closed = False
+
+    def counters(self) -> dict[str, int]:
+        out = {"depth_restarts": self.restarts}
+        if self.with_ir:
+            out["depth_missing_ir"] = self.missing_ir
+        return out
 
     def __iter__(self) -> Iterator[DepthFrame]:
-        rs = self.rs
-        last = -1
+        """The new depth frames until the file ends or the camera is closed; the pipeline is
+        stopped when this ends."""
         timeout_ms = int(self.timeout_s * 1000)
         if not self.live:  # poll, so that the end of a file is noticed at once
             timeout_ms = 100
-        while not self._closed:
-            try:
-                ok, frames = self.pipeline.try_wait_for_frames(timeout_ms)
-            except RuntimeError as exc:
-                if self._closed:
-                    return
-                raise DeviceLostError(f"{self.name}: stopped delivering frames ({exc})") from None
-            if not ok:
-                if self._closed:
-                    return
-                if self.live:
-                    raise DeviceLostError(
-                        f"{self.name}: no frame for {self.timeout_s:g} s (unplugged?)"
-                    )
-                if self._playback.current_status() == self.rs.playback_status.stopped:
+        last_new = time.monotonic()
+        try:
+            while True:
+                with self._guard.reading() as open_:
+                    if not open_:
+                        return
+                    try:
+                        ok, frames = self.pipeline.try_wait_for_frames(timeout_ms)
+                    except RuntimeError as exc:
+                        raise DeviceLostError(
+                            f"{self.name}: stopped delivering frames ({exc})"
+                        ) from None
+                    frame = self._new_frame(frames) if ok else None
+                if frame is not None:
+                    last_new = time.monotonic()
+                    yield frame
+                elif self.live:
+                    if time.monotonic() - last_new > self.timeout_s:
+                        raise DeviceLostError(
+                            f"{self.name}: no new frame for {self.timeout_s:g} s (unplugged?)"
+                        )
+                elif not ok and self._playback.current_status() == self.rs.playback_status.stopped:
                     return  # end of the file
-                continue
-            depth = frames.get_depth_frame()
-            if not depth:
-                continue
-            number = int(depth.get_frame_number())
-            if number <= last:
-                continue  # the pipeline's syncer repeats a frame when only IR is new
-            last = number
-            ir = None
-            if self.with_ir:
-                irf = frames.get_infrared_frame(1)
-                if irf:
-                    ir = np.array(np.asanyarray(irf.get_data()), dtype=np.uint8, copy=True)
-            yield DepthFrame(
-                np.array(np.asanyarray(depth.get_data()), dtype=np.uint16, copy=True),
-                depth_time_s(rs, depth, self.live),
-                number,
-                ir,
-            )
+        finally:
+            self._guard.release()
+
+    def _new_frame(self, frames: Any) -> DepthFrame | None:
+        """The frameset's depth frame if it is new (see the class docstring), else None."""
+        depth = frames.get_depth_frame()
+        if not depth:
+            return None
+        number = int(depth.get_frame_number())
+        if number == self._last_number:
+            return None  # the syncer repeats a frame when only IR is new
+        ir = None
+        if self.with_ir:
+            irf = frames.get_infrared_frame(1)
+            if not irf:
+                self.missing_ir += 1
+                return None
+            ir = np.array(np.asanyarray(irf.get_data()), dtype=np.uint8, copy=True)
+        if number < self._last_number:
+            self.restarts += 1
+            if self.restarts == 1:
+                self.warn(
+                    f"{self.name}: frame number went back from {self._last_number} to {number}: "
+                    "the stream restarted (as after a USB reconnect); going on (counted, "
+                    "warned once)"
+                )
+        self._last_number = number
+        return DepthFrame(
+            np.array(np.asanyarray(depth.get_data()), dtype=np.uint16, copy=True),
+            depth_time_s(self.rs, depth, self.live),
+            number,
+            ir,
+        )
+
+    def _stop(self) -> None:
+        with contextlib.suppress(RuntimeError):
+            self.pipeline.stop()
 
     def close(self) -> None:
-        if not self._closed:
-            self._closed = True
-            with contextlib.suppress(RuntimeError):
-                self.pipeline.stop()
+        """Stop streaming; the pipeline is stopped now, or by the reading thread as soon as
+        its wait returns (never under a wait)."""
+        self._guard.close()
 
 
 def list_realsense() -> list[dict[str, str]]:
-    """Attached RealSense devices: name, serial, firmware, USB type ([] without
-    pyrealsense2 or devices)."""
-    try:
-        rs = import_realsense()
-    except ThermodepthError:
-        return []
+    """Attached RealSense devices: name, serial, firmware, USB type. Raises ThermodepthError
+    (saying why) when pyrealsense2 cannot be imported."""
+    rs = import_realsense()
     out = []
     for dev in rs.context().query_devices():
 

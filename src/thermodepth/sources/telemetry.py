@@ -2,9 +2,11 @@
 
 Pure functions over ``uint16`` words, tested on rows built byte for byte from the layout.
 
-Layout (FLIR Lepton Software Interface Description Document (IDD), "Telemetry" section, rows
-A, B and C of 80 words each; the same offsets are used by GroupGets' PureThermal firmware
-``lepton.h`` and the periph.io / Cacophony ``lepton3`` drivers):
+Layout of the Lepton 3 / 3.5 (FLIR Lepton Engineering Datasheet 500-0659-00-09 and Software
+Interface Description Document (IDD) 110-0144-04, "Telemetry" section, rows A, B and C of 80
+words each; the same offsets are used by GroupGets' PureThermal firmware ``lepton.h``
+(``telemetry_data_l3``) and the periph.io / Cacophony ``lepton3`` drivers). Only the fields
+below are decoded; the Lepton 2 layout (housing temperature in words 25-26 and 32) is not.
 
 Row A (words 0-79)
 
@@ -16,21 +18,28 @@ word     content
 3-4      status bits (32 bits): bit 3 FFC desired; bits 4-5 FFC state (0 never
          commanded, 1 imminent, 2 in progress, 3 complete); bit 12 AGC on;
          bit 15 shutter lockout; bit 20 over-temperature shutdown imminent
-5-12     module serial number (128 bits)
+5-12     reserved on the Lepton 3 (module serial number on the Lepton 2)
 13-16    software revision (64 bits)
 20-21    frame counter (32 bits)
 22       frame mean (counts)
 23       FPA temperature, counts
 24       FPA temperature, kelvin x 100 (the paper's "VOx temperature")
-25       housing temperature, counts (reserved on Lepton 3: 0)
-26       housing temperature, kelvin x 100 (reserved on Lepton 3: 0)
+25-28    reserved on the Lepton 3 (housing temperature on the Lepton 2):
+         ``housing_temp_k`` is NaN
 29       FPA temperature at the last FFC, kelvin x 100
 30-31    time counter at the last FFC, ms (32 bits)
-32       housing temperature at the last FFC, kelvin x 100
 =======  ====================================================================
 
+FFC state (status bits 4-5) is decoded as the datasheet's Table 3 gives it (0 never commanded,
+1 imminent, 2 in progress, 3 complete), whatever the telemetry revision in word 0. The periph.io
+driver decodes it differently when word 0 is 8 (1 in progress, 2 complete); the Cacophony
+Lepton 3 driver, like this module, does not. A camera that used periph.io's encoding would
+show every frame as "in progress" between FFCs: check ``in_ffc`` on a first recording.
+
 Row C (words 160-239 of the telemetry block): word 48 TLinear enable state (Lepton 2.5 / 3.5),
-word 49 TLinear resolution (0: 0.1 K per count, 1: 0.01 K per count).
+word 49 TLinear resolution (0: 0.1 K per count, 1: 0.01 K per count). With TLinear on, the
+image holds kelvin x 100 (or x 10), not raw counts: :class:`~.lepton.LeptonCamera` refuses
+such frames.
 
 Word order of 32-bit fields: two consecutive words, **least significant word first** (word n
 holds bits 0-15, word n + 1 bits 16-31), as the IDD's telemetry tables list them and as the
@@ -56,8 +65,6 @@ from ..frames import FfcState, Telemetry
 
 ROW_WORDS = 80
 """Words per telemetry row (A, B, C)."""
-BLOCK_WORDS = 320
-"""Telemetry words in a 160x122 Lepton 3 frame: two image-wide rows (A, B, C, reserved)."""
 IMAGE_SHAPE = (120, 160)
 """Lepton 3 image, rows x columns."""
 FRAME_SHAPE = (122, 160)
@@ -65,15 +72,11 @@ FRAME_SHAPE = (122, 160)
 
 TelemetryLocation = Literal["footer", "header"]
 
-# row A word offsets (IDD)
-W_REVISION = 0
+# row A word offsets (IDD), the fields decoded
 W_TIME_COUNTER = 1  # 32 bits, LSW first
 W_STATUS = 3  # 32 bits, LSW first
 W_FRAME_COUNTER = 20  # 32 bits, LSW first
-W_FRAME_MEAN = 22
 W_FPA_TEMP_CK = 24
-W_HOUSING_TEMP_CK = 26
-W_FPA_TEMP_FFC_CK = 29
 W_TIME_FFC = 30  # 32 bits, LSW first
 # row C word offsets (IDD), relative to the start of row C
 W_TLINEAR_ENABLE = 48
@@ -114,9 +117,9 @@ def parse_telemetry(row_words: NDArray[np.uint16]) -> Telemetry:
     more, e.g. the 320 words of :func:`split_frame`) the TLinear state is read from row C.
     Raises :class:`TelemetryError` when the words cannot be telemetry: fewer than 80 words,
     an all-zero row A (telemetry disabled) or an FPA temperature outside
-    :data:`FPA_TEMP_RANGE_K`. Fields the camera leaves at 0 come out "unknown": housing
-    temperature NaN (reserved on the Lepton 3), time since FFC None (no FFC yet, or a last-FFC
-    time after the current time).
+    :data:`FPA_TEMP_RANGE_K`. The housing temperature is NaN (reserved on the Lepton 3); the
+    time since FFC is None when unknown (no FFC yet, or a last-FFC time after the current
+    time).
     """
     words = np.asarray(row_words)
     if words.ndim != 1 or words.size < ROW_WORDS:
@@ -140,7 +143,6 @@ def parse_telemetry(row_words: NDArray[np.uint16]) -> Telemetry:
             f"telemetry: FPA temperature {fpa_k:.2f} K (word {W_FPA_TEMP_CK} = {fpa_ck}) is "
             f"outside {lo}-{hi} K: not telemetry, or a corrupt frame"
         )
-    housing_ck = int(row_a[W_HOUSING_TEMP_CK])
     status = word32(row_a, W_STATUS)
     state = FfcState((status & STATUS_FFC_STATE_MASK) >> STATUS_FFC_STATE_SHIFT)
     now_ms = word32(row_a, W_TIME_COUNTER)
@@ -157,7 +159,7 @@ def parse_telemetry(row_words: NDArray[np.uint16]) -> Telemetry:
     return Telemetry(
         frame_counter=word32(row_a, W_FRAME_COUNTER),
         fpa_temp_k=fpa_k,
-        housing_temp_k=centikelvin_to_k(housing_ck) if housing_ck else float("nan"),
+        housing_temp_k=float("nan"),  # reserved on the Lepton 3
         ffc_state=state,
         time_since_ffc_s=since,
         ffc_desired=bool(status & STATUS_FFC_DESIRED),
