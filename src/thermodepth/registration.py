@@ -108,8 +108,74 @@ def _project(d, scale, a0, a1, a2, b0, b1, b2, geo, w_t, h_t):  # pragma: no cov
     return uu, vv, px, py, pz, idx
 
 
+# The thermal camera sees only part of the depth image (56 of 89 deg here). On one depth
+# row, the pixels that land in the thermal image at inverse depth w = 1/z form one interval,
+# whose ends move monotonically with w (parallax). A table of those intervals over a grid of
+# w, per row, bounds where any pixel of a row can land given the row's depth range: pixels
+# outside that span are out of view without projecting them.
+_W_STEP = 0.25  # 1/m: the table's grid of inverse depth, 0 .. 10 (z >= 0.1 m)
+_W_SAMPLES = 41
+_SPAN_MARGIN = 2  # pixels: float32 rounding and the curvature between grid points
+
+
 @numba.njit(parallel=True, **_JIT)
-def _zbuffer(depth, scale, a0, a1, a2, brow, geo, h_t, w_t, n_chunks, zb, rb):  # pragma: no cover
+def _view_table(scale, a0, a1, a2, brow, geo, w_t, h_t, lo, hi):  # pragma: no cover - JIT
+    # lo[v, k], hi[v, k]: the depth pixels u of row v, lo <= u < hi, that land in the thermal
+    # image at inverse depth w = k * _W_STEP (lo >= hi: none)
+    h = brow.shape[0]
+    w = a0.shape[1]
+    for v in numba.prange(h):
+        rv = min(np.int64(v), a0.shape[0] - 1)  # prange indices are unsigned
+        b = brow[v]
+        for k in range(lo.shape[1]):
+            inv = max(k * _W_STEP, 1e-6)
+            d = np.float32(1.0 / (inv * scale))  # the depth, in depth units
+            first = w
+            last = -1
+            for u in range(w):
+                i = _project(
+                    d, scale, a0[rv, u], a1[rv, u], a2[rv, u], b[0], b[1], b[2], geo, w_t, h_t
+                )[5]
+                if i >= 0:
+                    first = min(first, u)
+                    last = max(last, u)
+            lo[v, k] = first
+            hi[v, k] = last + 1
+
+
+@numba.njit(inline="always", **_JIT)
+def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
+    # [u0, u1): where this row's pixels can land in the thermal image, given its depth range
+    w = drow.size
+    dmin = np.uint16(65535)
+    dmax = np.uint16(0)
+    for u in range(w):
+        d = drow[u]
+        dmin = min(dmin, d if d > 0 else np.uint16(65535))
+        dmax = max(dmax, d)
+    if dmax == 0:
+        return 0, 0  # no valid depth at all
+    w_lo = 1.0 / (np.float32(dmax) * scale)
+    w_hi = 1.0 / (np.float32(dmin) * scale)
+    k0 = int(np.floor(w_lo / _W_STEP))
+    k1 = int(np.ceil(w_hi / _W_STEP))
+    if k1 >= lo_row.size:
+        return 0, w  # nearer than the table reaches: look at everything
+    u0 = w
+    u1 = 0
+    for k in range(k0, k1 + 1):
+        if lo_row[k] < hi_row[k]:
+            u0 = min(u0, lo_row[k])
+            u1 = max(u1, hi_row[k])
+    if u0 >= u1:
+        return 0, 0
+    return max(u0 - _SPAN_MARGIN, 0), min(u1 + _SPAN_MARGIN, w)
+
+
+@numba.njit(parallel=True, **_JIT)
+def _zbuffer(
+    depth, scale, a0, a1, a2, brow, geo, h_t, w_t, lo, hi, n_chunks, zb, rb
+):  # pragma: no cover - JIT
     # Per chunk of rows: the nearest Z per thermal pixel and that point's range; then the
     # chunks are merged into chunk 0.
     h, w = depth.shape
@@ -123,19 +189,23 @@ def _zbuffer(depth, scale, a0, a1, a2, brow, geo, h_t, w_t, n_chunks, zb, rb):  
         for v in range(k * h // n_chunks, (k + 1) * h // n_chunks):
             rv = min(v, a0.shape[0] - 1)
             drow, ar0, ar1, ar2, b = depth[v], a0[rv], a1[rv], a2[rv], brow[v]
-            for u in range(w):
+            u0, u1 = _row_span(drow, scale, lo[v], hi[v])
+            # loops over views that start at 0: a non-zero range start would make numba
+            # check every index for wraparound, which stops vectorisation (4x slower)
+            dr, c0, c1, c2 = drow[u0:u1], ar0[u0:u1], ar1[u0:u1], ar2[u0:u1]
+            for u in range(dr.size):
                 _, _, px, py, pz, i = _project(
-                    drow[u], scale, ar0[u], ar1[u], ar2[u], b[0], b[1], b[2], geo, w_t, h_t
+                    dr[u], scale, c0[u], c1[u], c2[u], b[0], b[1], b[2], geo, w_t, h_t
                 )
                 zt[u] = pz
                 rt[u] = np.sqrt(px * px + py * py + pz * pz)
                 idx[u] = i
-            for u in range(w):
+            for u in range(dr.size):
                 i = idx[u]
                 if i >= 0 and zt[u] < zloc[i]:
                     zloc[i] = zt[u]
                     rloc[i] = rt[u]
-    for i in numba.prange(zb.shape[1]):
+    for i in range(zb.shape[1]):  # serial: 19,200 compares cost less than waking threads
         for k in range(1, n_chunks):
             if zb[k, i] < zb[0, i]:
                 zb[0, i] = zb[k, i]
@@ -151,6 +221,8 @@ def _sample(
     a2,
     brow,
     geo,
+    lo,
+    hi,
     table,
     thermal,
     tol_sigma,
@@ -174,17 +246,23 @@ def _sample(
         for v in range(k * h // n_chunks, (k + 1) * h // n_chunks):
             rv = min(v, a0.shape[0] - 1)
             drow, ar0, ar1, ar2, b = depth[v], a0[rv], a1[rv], a2[rv], brow[v]
-            for u in range(w):
+            u0, u1 = _row_span(drow, scale, lo[v], hi[v])
+            # outside the span: invalid depth, or out of the thermal view
+            _fill_outside(drow[:u0], out[v, :u0], reason[v, :u0])
+            _fill_outside(drow[u1:], out[v, u1:], reason[v, u1:])
+            # inside: loops over views that start at 0 (see _zbuffer)
+            dr, c0, c1, c2 = drow[u0:u1], ar0[u0:u1], ar1[u0:u1], ar2[u0:u1]
+            orow, rrow = out[v, u0:u1], reason[v, u0:u1]
+            n = dr.size
+            for u in range(n):
                 ut[u], vt[u], _, _, zt[u], idx[u] = _project(
-                    drow[u], scale, ar0[u], ar1[u], ar2[u], b[0], b[1], b[2], geo, w_t, h_t
+                    dr[u], scale, c0[u], c1[u], c2[u], b[0], b[1], b[2], geo, w_t, h_t
                 )
-            for u in range(w):
+            for u in range(n):
                 j = max(idx[u], np.int32(0))
                 val[u] = table[j, 0]
                 near[u] = table[j, 1]
-            orow = out[v]
-            rrow = reason[v]
-            for u in range(w):
+            for u in range(n):
                 i = idx[u]
                 pz = zt[u]
                 # hidden when the thermal pixel's nearest surface is clearly in front: beyond
@@ -198,7 +276,17 @@ def _sample(
                     + np.int32(occluded) * Reason.OCCLUDED
                 )
             if bilinear:
-                _bilinear_row(ut, vt, zt, rrow, orow, table, thermal, tol_sigma, tol_slope)
+                _bilinear_row(
+                    ut[:n], vt[:n], zt[:n], rrow, orow, table, thermal, tol_sigma, tol_slope
+                )
+
+
+@numba.njit(inline="always", **_JIT)
+def _fill_outside(drow, orow, rrow):  # pragma: no cover - JIT
+    nan = np.float32(np.nan)
+    for u in range(drow.size):
+        orow[u] = nan
+        rrow[u] = Reason.INVALID_DEPTH if drow[u] == 0 else Reason.OUTSIDE
 
 
 @numba.njit(inline="always", **_JIT)
@@ -286,6 +374,11 @@ class Registration:
         self._tol_sigma = np.float32(tol.n_sigma * tol.subpixel / (d.fx * tol.stereo_baseline_m))
         self._tol_slope = np.float32(tol.slope / t.fx)
         self._n_chunks = max(1, numba.get_num_threads())
+        self._span_lo = np.empty((d.height, _W_SAMPLES), dtype=np.int32)
+        self._span_hi = np.empty_like(self._span_lo)
+        _view_table(
+            self._scale, *self._rays, self._geo, t.width, t.height, self._span_lo, self._span_hi
+        )
         if method == "paper":
             self._paper_affine = _fit_paper_map(calibration, paper_reference_m)
             self._paper = _paper_sampling_maps(calibration, self._paper_affine)
@@ -329,7 +422,19 @@ class Registration:
         h_t, w_t = self.calibration.thermal.shape
         zb = np.empty((self._n_chunks, h_t * w_t), dtype=np.float32)
         rb = np.empty_like(zb)
-        _zbuffer(depth, self._scale, *self._rays, self._geo, h_t, w_t, self._n_chunks, zb, rb)
+        _zbuffer(
+            depth,
+            self._scale,
+            *self._rays,
+            self._geo,
+            h_t,
+            w_t,
+            self._span_lo,
+            self._span_hi,
+            self._n_chunks,
+            zb,
+            rb,
+        )
         return zb[0], rb[0]
 
     def depth_to_thermal(self, depth: NDArray[np.uint16]) -> DepthOnThermal:
@@ -389,6 +494,8 @@ class Registration:
             self._scale,
             *self._rays,
             self._geo,
+            self._span_lo,
+            self._span_hi,
             table,
             therm,
             self._tol_sigma,
