@@ -334,14 +334,21 @@ class RadianceModel:
         temp = raw_to_celsius(
             corrected, self._params(distance_m, ambient_c, humidity_pct, emissivity)
         )
-        d = np.broadcast_to(np.asarray(distance_m, np.float64), temp.shape)
-        x = np.broadcast_to(np.asarray(vox_c, np.float64), temp.shape)
-        flag = _range_flag(d, *self.distance_range_m, 0.25, Flag.DISTANCE_OUTSIDE)
-        flag |= _range_flag(x, *self.vox_range_c, 3.0, Flag.VOX_OUTSIDE)
+        # each flag at its own shape (often one VOx value and one distance per frame), then
+        # broadcast once
         lo, hi = self.temp_range_c
-        flag |= _range_flag(temp, lo, hi, max(10.0, 0.5 * (hi - lo)), Flag.TEMPERATURE_OUTSIDE)
-        flag |= np.where(np.isfinite(temp), np.uint8(0), np.uint8(Flag.INVALID))
-        return Compensated(temp, flag)
+        flag = (
+            _range_flag(
+                np.asarray(distance_m, np.float64),
+                *self.distance_range_m,
+                0.25,
+                Flag.DISTANCE_OUTSIDE,
+            )
+            | _range_flag(np.asarray(vox_c, np.float64), *self.vox_range_c, 3.0, Flag.VOX_OUTSIDE)
+            | _range_flag(temp, lo, hi, max(10.0, 0.5 * (hi - lo)), Flag.TEMPERATURE_OUTSIDE)
+            | np.where(np.isfinite(temp), np.uint8(0), np.uint8(Flag.INVALID))
+        )
+        return Compensated(temp, np.broadcast_to(flag, temp.shape).astype(np.uint8))
 
     def apply(
         self,

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import cv2
@@ -202,6 +203,16 @@ def _plane(points: FloatArray) -> tuple[FloatArray, FloatArray] | None:
     return c, vt[2]
 
 
+@lru_cache(maxsize=8)
+def _pixel_corners(thermal: Intrinsics) -> FloatArray:
+    """Each pixel's four corner rays (h, w, 4, 3): top-left, top-right, bottom-right,
+    bottom-left, as (x, y, 1) undistorted. Cached per camera."""
+    cx, cy = corner_rays(thermal)
+    x = np.stack([cx[:-1, :-1], cx[:-1, 1:], cx[1:, 1:], cx[1:, :-1]], axis=-1)
+    y = np.stack([cy[:-1, :-1], cy[:-1, 1:], cy[1:, 1:], cy[1:, :-1]], axis=-1)
+    return np.stack([x, y, np.ones_like(x)], axis=-1)
+
+
 def _footprints(
     u: NDArray[np.int64],
     v: NDArray[np.int64],
@@ -211,15 +222,17 @@ def _footprints(
     """Area (m^2) of thermal pixels' (u, v) footprints on a plane (thermal frame): the four
     corner rays intersected with the plane, the quadrilateral's area."""
     c, n = plane
-    cx, cy = corner_rays(thermal)
-    ci = np.stack([v, v, v + 1, v + 1], axis=-1)  # corners: top-left, top-right, ...
-    cj = np.stack([u, u + 1, u + 1, u], axis=-1)
-    rays = np.stack([cx[ci, cj], cy[ci, cj], np.ones(ci.shape)], axis=-1)  # (N, 4, 3)
+    rays = _pixel_corners(thermal)[v, u]  # (N, 4, 3)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (c @ n) / (rays @ n)
     q = rays * t[..., None]
     area = 0.5 * np.linalg.norm(np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1]), axis=-1)
     return np.where(np.isfinite(area) & (t > 0).all(axis=1), area, np.nan)
+
+
+@lru_cache(maxsize=8)
+def _inverse(t: RigidTransform) -> RigidTransform:
+    return t.inverse()
 
 
 def find_hotspots(
@@ -241,15 +254,19 @@ def find_hotspots(
     with np.errstate(invalid="ignore"):
         hot = (temp_thermal_c >= threshold_c).astype(np.uint8)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(hot, connectivity=8)
-    depth_from_thermal = thermal_from_depth.inverse()
-    eps = np.broadcast_to(np.asarray(emissivity, np.float64), temp_thermal_c.shape)
+    depth_from_thermal = _inverse(thermal_from_depth)
+    eps_map = np.ndim(emissivity) > 0
     t_amb4 = float(celsius_to_kelvin(ambient_temp_c)) ** 4
     out = []
     for k in range(1, n):
         if stats[k, cv2.CC_STAT_AREA] < min_thermal_px:
             continue
-        v, u = np.nonzero(labels == k)
-        temps = temp_thermal_c[v, u]
+        x0, y0 = stats[k, cv2.CC_STAT_LEFT], stats[k, cv2.CC_STAT_TOP]
+        bw, bh = stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]
+        mine = labels[y0 : y0 + bh, x0 : x0 + bw] == k  # look only inside its box
+        v, u = np.nonzero(mine)
+        v, u = v + y0, u + x0
+        temps = temp_thermal_c[v, u]  # all above the threshold: finite
         z = z_thermal_m[v, u]
         known = np.isfinite(z)
         rx, ry = pixel_rays(thermal)
@@ -266,22 +283,19 @@ def find_hotspots(
             centroid_t = (pts_t[good] * w[:, None]).sum(axis=0) / w.sum()
             centroid = depth_from_thermal.apply(centroid_t)
             t4 = celsius_to_kelvin(temps[known][good]) ** 4
-            power = float(np.sum(w * eps[v, u][known][good] * STEFAN_BOLTZMANN * (t4 - t_amb4)))
+            eps = np.asarray(emissivity)[v, u][known][good] if eps_map else float(emissivity)
+            power = float(np.sum(w * eps * STEFAN_BOLTZMANN * (t4 - t_amb4)))
             area_m2 = float(w.sum())
         else:
             centroid = np.full(3, np.nan)
             power = area_m2 = float("nan")
-        x0, y0 = stats[k, cv2.CC_STAT_LEFT], stats[k, cv2.CC_STAT_TOP]
-        bw, bh = stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]
         # the blur spreads a small target over a halo above the threshold: judge the spot
         # rule on its core, the pixels within 10 % of its excess over the threshold from the
         # maximum (a target that fills 3 x 3 pixels reads flat there)
         box = temp_thermal_c[y0 : y0 + bh, x0 : x0 + bw]
-        t_max = np.nanmax(temps)
+        t_max = float(temps.max())
         with np.errstate(invalid="ignore"):
-            core_px = (labels[y0 : y0 + bh, x0 : x0 + bw] == k) & (
-                box >= t_max - 0.1 * (t_max - threshold_c)
-            )
+            core_px = mine & (box >= t_max - 0.1 * (t_max - threshold_c))
         core = cv2.erode(
             core_px.astype(np.uint8),
             np.ones((3, 3), np.uint8),
@@ -292,8 +306,8 @@ def find_hotspots(
         out.append(
             Hotspot(
                 label=k,
-                max_c=float(np.nanmax(temps)),
-                mean_c=float(np.nanmean(temps)),
+                max_c=t_max,
+                mean_c=float(temps.mean()),
                 centroid_m=(float(centroid[0]), float(centroid[1]), float(centroid[2])),
                 distance_m=float(np.linalg.norm(centroid)),
                 area_m2=area_m2,

@@ -340,8 +340,10 @@ class Pipeline:
         distance = near.range_m
         missing = np.isnan(distance)
         if missing.any():
+            # the median of every 4th pixel each way: robust, and 16x cheaper than all
+            sample = distance[::4, ::4]
             fallback = s.fallback_distance_m or (
-                float(np.nanmedian(distance)) if not missing.all() else 1.0
+                float(np.nanmedian(sample)) if np.isfinite(sample).any() else 1.0
             )
             distance = np.where(missing, np.float32(fallback), distance)
         vox_c = pair.telemetry.fpa_temp_c
