@@ -153,8 +153,12 @@ def undistort(
         jyy = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
         det = jxx * jyy - jxy * jyx
         with np.errstate(divide="ignore", invalid="ignore"):
-            x = x - (jyy * fx - jxy * fy) / det
-            y = y - (jxx * fy - jyx * fx) / det
+            dx = (jyy * fx - jxy * fy) / det
+            dy = (jxx * fy - jyx * fx) / det
+        x, y = x - dx, y - dy
+        # converged everywhere: further steps change nothing (NaN steps never count as done)
+        if np.all(np.abs(dx) < 1e-15) and np.all(np.abs(dy) < 1e-15):
+            break
     return x, y
 
 

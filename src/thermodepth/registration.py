@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .calibration import Calibration
+from .camera import distort, pixel_rays
 
 FloatArray = NDArray[np.float32]
 
@@ -574,8 +575,7 @@ def _ray_terms(cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray, Fl
         a = [np.ascontiguousarray((x * rot[i, 0])[None, :], dtype=np.float32) for i in range(3)]
         b = y[:, None] * rot[:, 1] + rot[:, 2]
         return a[0], a[1], a[2], np.ascontiguousarray(b, dtype=np.float32)
-    u, v = d.pixel_grid()
-    x, y = d.normalized_from_pixels(np.stack([u, v], axis=-1))
+    x, y = pixel_rays(d)
     a = [
         np.ascontiguousarray(x * rot[i, 0] + y * rot[i, 1] + rot[i, 2], dtype=np.float32)
         for i in range(3)
@@ -604,8 +604,6 @@ def _paper_sampling_maps(
 ) -> tuple[FloatArray, FloatArray]:
     """Raw thermal (u, v) sampled by each depth pixel: the affine map into the undistorted
     thermal image, then the lens distortion (undistorting the image = sampling it there)."""
-    from .camera import distort
-
     d, t = cal.depth, cal.thermal
     a_u, b_u, a_v, b_v = affine
     u, v = d.pixel_grid()
