@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -161,6 +162,33 @@ def test_single_target_temperature_fits_offset_only() -> None:
     assert model.cv["gain_fixed_to_one"] is True
     assert model.gain[0] == 1.0 and not any(model.gain[1:])
     assert overall(apply_to_table(model, table).temp_c, table)["rmse_c"] < 0.1
+
+
+def test_tables_with_per_row_conditions(generalisation) -> None:  # type: ignore[no-untyped-def]
+    model = generalisation.models["radiance"]
+    tab = generalisation.tests["held-out distances"]
+    n = len(tab)
+    rng = np.random.default_rng(4)
+    cols = {
+        **tab.columns,
+        "ambient_temp_c": rng.choice([15.0, 25.0, 30.0], n),
+        "humidity_pct": rng.choice([20.0, 50.0, 80.0], n),
+        "emissivity": rng.choice([0.9, 0.95], n),
+    }
+    varied = replace(tab, columns=cols)
+    got = apply_to_table(model, varied).temp_c
+    for i in rng.choice(n, 5, replace=False):
+        one = model.apply(
+            cols["measured_temp_c"][i],
+            cols["vox_temp_c"][i],
+            cols["distance_m"][i],
+            ambient_c=cols["ambient_temp_c"][i],
+            humidity_pct=cols["humidity_pct"][i],
+            emissivity=cols["emissivity"][i],
+        )
+        assert got[i] == pytest.approx(float(one.temp_c), abs=1e-9)
+    # the conditions matter: the same readings at 25 C / 50 % / 0.95 compensate differently
+    assert np.abs(got - apply_to_table(model, tab).temp_c).max() > 0.1
 
 
 def test_whole_frames_with_a_distance_map() -> None:

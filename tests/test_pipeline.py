@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from thermodepth.cli import app
-from thermodepth.compensation import Flag, save_model
+from thermodepth.compensation import Flag, PaperModel, save_model
 from thermodepth.errors import InputError
 from thermodepth.evaluation import compensation_generalisation
 from thermodepth.figures import plot_overlay
@@ -23,6 +23,8 @@ from thermodepth.pipeline import (
     HotspotSettings,
     Pipeline,
     PixelFlag,
+    PlanckSettings,
+    RadiometrySettings,
     RoiSettings,
     Settings,
 )
@@ -94,6 +96,37 @@ def test_compensation_in_the_pipeline_removes_the_vox_effect(model_path: Path) -
             out.append(float(np.median(plate)))
     assert plain[1] - plain[0] > 2.0  # the VOx effect: ~2.7 C over 25 -> 40 C
     assert compensated == pytest.approx([39.0, 39.0], abs=0.1)
+
+
+def test_reflected_temperature_reaches_every_compensation(model_path: Path, tmp_path: Path) -> None:
+    # the plate (emissivity 0.95) reflects 5% of its surroundings: hotter surroundings must
+    # lower the temperature read from the same counts, with or without a model
+    rig = inspection_rig(1.2)
+    pair = rig.frame()
+    save_model(PaperModel.preset_2022(), tmp_path / "paper.json")
+    for model in (None, tmp_path / "paper.json", model_path):
+        median = []
+        for reflected_c in (None, 60.0):
+            radiometry = RadiometrySettings(reflected_temp_c=reflected_c)
+            frame = Pipeline(
+                Settings(compensation=model, radiometry=radiometry), rig.calibration
+            ).process(pair)
+            median.append(float(np.median(frame.temp_thermal_c[55:62, 70:78])))
+        assert median[0] - median[1] == pytest.approx(2.2, abs=0.3), model
+
+
+def test_radiance_model_refuses_other_radiometry(model_path: Path) -> None:
+    cal = inspection_rig(1.0).calibration
+    for radiometry in (
+        RadiometrySettings(method="thermimage"),
+        RadiometrySettings(planck=PlanckSettings(R=1e5, B=1400, F=1, O=6000)),
+    ):
+        with pytest.raises(InputError, match="carries its own radiometry"):
+            Pipeline(Settings(compensation=model_path, radiometry=radiometry), cal)
+    # naming the model's own constants is fine
+    Pipeline(
+        Settings(compensation=model_path, radiometry=RadiometrySettings(planck="paper2022")), cal
+    )
 
 
 def test_vox_outside_the_model_is_flagged_on_measurements(model_path: Path) -> None:
@@ -168,7 +201,10 @@ def test_calibration_that_does_not_match_the_frames() -> None:
             "rois.0: give exactly one of",
         ),
         ("alarms: [{name: x, above_c: 60, what: pump}]\n", "what='pump' is neither 'hotspot'"),
-        ("registration: {method: magic}\n", "registration.method: Input should be 'reproject'"),
+        (
+            "registration: {method: magic}\n",
+            r"registration.method: choose from \['paper', 'reproject'\] \(got 'magic'\)",
+        ),
     ],
 )
 def test_bad_settings_are_one_line(tmp_path: Path, text: str, message: str) -> None:

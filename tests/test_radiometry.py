@@ -212,6 +212,26 @@ def test_unknown_method_and_bad_params_raise() -> None:
         ObjectParams(emissivity=0.0)
 
 
+def test_air_conditions_per_row_broadcast() -> None:
+    # one air temperature, humidity and reflected temperature per row, as sweep tables have
+    amb_c = np.array([15.0, 25.0, 35.0])
+    rh_pct = np.array([20.0, 50.0, 90.0])
+    refl_c = np.array([10.0, 60.0, 25.0])
+    obj = ObjectParams.from_celsius(0.9, [0.5, 2.0, 4.0], amb_c, rh_pct, refl_c)
+    counts = np.array([8400.0, 8600.0, 9000.0])
+    rows = raw_to_celsius(counts, RadiometryParams(obj=obj))
+    for i in range(3):
+        one = ObjectParams.from_celsius(0.9, obj.distance_m[i], amb_c[i], rh_pct[i], refl_c[i])
+        assert isinstance(one.atmosphere_temp_k, float)  # scalars stay scalars
+        assert one.atmosphere_temp_k == pytest.approx(amb_c[i] + K0)
+        assert rows[i] == pytest.approx(raw_to_celsius(counts[i], RadiometryParams(obj=one)))
+    # one bad element is enough to refuse
+    with pytest.raises(ValueError, match="percent"):
+        ObjectParams.from_celsius(0.9, 1.0, 25.0, [50.0, 150.0])
+    with pytest.raises(ValueError, match="positive temperature in kelvin"):
+        ObjectParams.from_celsius(0.9, 1.0, [25.0, -300.0], 50.0)
+
+
 def test_tlinear() -> None:
     assert tlinear_to_celsius(31215) == pytest.approx(39.0)
     assert tlinear_to_celsius(3122, resolution_k=0.1) == pytest.approx(39.05)

@@ -144,7 +144,6 @@ def counts_to_celsius(
         RADIOMETRY_METHODS,
         ObjectParams,
         RadiometryParams,
-        celsius_to_kelvin,
         raw_to_celsius,
     )
 
@@ -153,14 +152,8 @@ def counts_to_celsius(
     if method not in RADIOMETRY_METHODS:
         raise InputError(f"--method: unknown {method!r}; choose from {sorted(RADIOMETRY_METHODS)}")
     try:
-        obj = ObjectParams(
-            emissivity=emissivity,
-            distance_m=distance_m,
-            reflected_temp_k=float(
-                celsius_to_kelvin(ambient_c if reflected_c is None else reflected_c)
-            ),
-            atmosphere_temp_k=float(celsius_to_kelvin(ambient_c)),
-            relative_humidity=humidity_pct / 100.0,
+        obj = ObjectParams.from_celsius(
+            emissivity, distance_m, ambient_c, humidity_pct, reflected_c
         )
     except ValueError as exc:
         raise InputError(str(exc)) from None

@@ -41,7 +41,6 @@ from .radiometry import (
     ObjectParams,
     PlanckConstants,
     RadiometryParams,
-    celsius_to_kelvin,
     celsius_to_raw,
     raw_to_celsius,
 )
@@ -109,6 +108,7 @@ class PaperModel:
     def fit(cls, table: SweepTable, reference_temp_c: float | None = None) -> PaperModel:
         """Least squares per distance on the rows at ``reference_temp_c`` (default: 39 C if
         the sweep has it, else its most frequent reference temperature)."""
+        _check_sweep(table)
         ref = _pick_reference(table, reference_temp_c)
         rows = table.select(table["reference_temp_c"] == ref)
         x, y, d = rows["vox_temp_c"], rows["measured_temp_c"], rows["distance_m"]
@@ -257,23 +257,17 @@ class RadianceModel:
         ambient_c: ArrayLike | None,
         humidity_pct: ArrayLike | None,
         emissivity: ArrayLike | None,
+        reflected_c: ArrayLike | None,
     ) -> RadiometryParams:
         c = self.conditions
-        amb = celsius_to_kelvin(c.ambient_temp_c if ambient_c is None else ambient_c)
-        rh = np.asarray(c.humidity_pct if humidity_pct is None else humidity_pct) / 100.0
-        eps = np.asarray(c.emissivity if emissivity is None else emissivity, np.float64)
-        # ObjectParams takes scalars for the air: per-row values are grouped by the caller
-        return RadiometryParams(
-            planck=self.planck,
-            max_counts=None,
-            obj=ObjectParams(
-                emissivity=eps,
-                distance_m=np.asarray(distance_m, np.float64),
-                reflected_temp_k=float(amb),
-                atmosphere_temp_k=float(amb),
-                relative_humidity=float(rh),
-            ),
+        obj = ObjectParams.from_celsius(
+            c.emissivity if emissivity is None else emissivity,
+            distance_m,
+            c.ambient_temp_c if ambient_c is None else ambient_c,
+            c.humidity_pct if humidity_pct is None else humidity_pct,
+            reflected_c,
         )
+        return RadiometryParams(planck=self.planck, max_counts=None, obj=obj)
 
     def gain_offset(self, vox_c: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """g(x) and h(x) (counts) at VOx temperatures ``vox_c`` (C)."""
@@ -291,12 +285,13 @@ class RadianceModel:
         true_c: ArrayLike,
         vox_c: ArrayLike,
         distance_m: ArrayLike,
-        ambient_c: float | None = None,
-        humidity_pct: float | None = None,
+        ambient_c: ArrayLike | None = None,
+        humidity_pct: ArrayLike | None = None,
         emissivity: ArrayLike | None = None,
+        reflected_c: ArrayLike | None = None,
     ) -> FloatArray:
         """Raw counts the camera gives for a target at ``true_c`` (the forward model)."""
-        params = self._params(distance_m, ambient_c, humidity_pct, emissivity)
+        params = self._params(distance_m, ambient_c, humidity_pct, emissivity, reflected_c)
         w_ap = celsius_to_raw(true_c, params) - self.planck.O
         g, h = self.gain_offset(vox_c)
         return self.planck.O + g * w_ap + h
@@ -306,14 +301,19 @@ class RadianceModel:
         true_c: ArrayLike,
         vox_c: ArrayLike,
         distance_m: ArrayLike,
-        ambient_c: float | None = None,
-        humidity_pct: float | None = None,
+        ambient_c: ArrayLike | None = None,
+        humidity_pct: ArrayLike | None = None,
         emissivity: ArrayLike | None = None,
+        reflected_c: ArrayLike | None = None,
     ) -> FloatArray:
         """The uncompensated reading (emissivity, no distance correction) the model predicts
         for a target at ``true_c`` (the curves of Fig. 13)."""
-        counts = self.predict_counts(true_c, vox_c, distance_m, ambient_c, humidity_pct, emissivity)
-        return raw_to_celsius(counts, self._params(0.0, ambient_c, humidity_pct, emissivity))
+        counts = self.predict_counts(
+            true_c, vox_c, distance_m, ambient_c, humidity_pct, emissivity, reflected_c
+        )
+        return raw_to_celsius(
+            counts, self._params(0.0, ambient_c, humidity_pct, emissivity, reflected_c)
+        )
 
     # -- compensation -----------------------------------------------------------------------
 
@@ -322,9 +322,10 @@ class RadianceModel:
         counts: ArrayLike,
         vox_c: ArrayLike,
         distance_m: ArrayLike,
-        ambient_c: float | None = None,
-        humidity_pct: float | None = None,
+        ambient_c: ArrayLike | None = None,
+        humidity_pct: ArrayLike | None = None,
         emissivity: ArrayLike | None = None,
+        reflected_c: ArrayLike | None = None,
     ) -> Compensated:
         """True temperature (C) from raw counts: undo the sensor's g(x), h(x), then invert
         emissivity, reflection and air at ``distance_m`` (scalar or per pixel)."""
@@ -332,7 +333,7 @@ class RadianceModel:
         g, h = self.gain_offset(vox_c)
         corrected = self.planck.O + (s - self.planck.O - h) / g
         temp = raw_to_celsius(
-            corrected, self._params(distance_m, ambient_c, humidity_pct, emissivity)
+            corrected, self._params(distance_m, ambient_c, humidity_pct, emissivity, reflected_c)
         )
         # each flag at its own shape (often one VOx value and one distance per frame), then
         # broadcast once
@@ -355,14 +356,19 @@ class RadianceModel:
         measured_c: ArrayLike,
         vox_c: ArrayLike,
         distance_m: ArrayLike,
-        ambient_c: float | None = None,
-        humidity_pct: float | None = None,
+        ambient_c: ArrayLike | None = None,
+        humidity_pct: ArrayLike | None = None,
         emissivity: ArrayLike | None = None,
+        reflected_c: ArrayLike | None = None,
     ) -> Compensated:
         """True temperature (C) from uncompensated readings (radiometry with emissivity but
         no distance correction, as in the sweep CSV). All arguments broadcast."""
-        counts = celsius_to_raw(measured_c, self._params(0.0, ambient_c, humidity_pct, emissivity))
-        return self.apply_counts(counts, vox_c, distance_m, ambient_c, humidity_pct, emissivity)
+        counts = celsius_to_raw(
+            measured_c, self._params(0.0, ambient_c, humidity_pct, emissivity, reflected_c)
+        )
+        return self.apply_counts(
+            counts, vox_c, distance_m, ambient_c, humidity_pct, emissivity, reflected_c
+        )
 
     # -- fitting ----------------------------------------------------------------------------
 
@@ -459,27 +465,17 @@ class _Design:
 
     @classmethod
     def build(cls, table: SweepTable, cond: Conditions, planck: PlanckConstants) -> _Design:
-        n = len(table)
         amb = table.get("ambient_temp_c", cond.ambient_temp_c)
         rh = table.get("humidity_pct", cond.humidity_pct)
         eps = table.get("emissivity", cond.emissivity)
-        w_meas, w_ap, slope = np.empty(n), np.empty(n), np.empty(n)
-        # radiometry takes scalar air conditions: one pass per (ambient, humidity) group
-        for a, r in {(float(a), float(r)) for a, r in zip(amb, rh, strict=True)}:
-            sel = (amb == a) & (rh == r)
-            obj = ObjectParams(
-                emissivity=eps[sel],
-                distance_m=0.0,
-                reflected_temp_k=a + 273.15,
-                atmosphere_temp_k=a + 273.15,
-                relative_humidity=r / 100.0,
-            )
-            at0 = RadiometryParams(planck=planck, obj=obj, max_counts=None)
-            meas = table["measured_temp_c"][sel]
-            w_meas[sel] = celsius_to_raw(meas, at0) - planck.O
-            slope[sel] = (celsius_to_raw(meas + 0.05, at0) - celsius_to_raw(meas - 0.05, at0)) / 0.1
-            atd = at0.with_object(distance_m=table["distance_m"][sel])
-            w_ap[sel] = celsius_to_raw(table["reference_temp_c"][sel], atd) - planck.O
+        at0 = RadiometryParams(
+            planck=planck, obj=ObjectParams.from_celsius(eps, 0.0, amb, rh), max_counts=None
+        )
+        meas = table["measured_temp_c"]
+        w_meas = celsius_to_raw(meas, at0) - planck.O
+        slope = (celsius_to_raw(meas + 0.05, at0) - celsius_to_raw(meas - 0.05, at0)) / 0.1
+        atd = at0.with_object(distance_m=table["distance_m"])
+        w_ap = celsius_to_raw(table["reference_temp_c"], atd) - planck.O
         x = table["vox_temp_c"]
         centre = float((x.min() + x.max()) / 2)
         scale = float(max((x.max() - x.min()) / 2, 1.0))
@@ -599,19 +595,16 @@ def fit(table: SweepTable, method: str = "radiance", **options: Any) -> Compensa
 
 def apply_to_table(model: CompensationModel, table: SweepTable) -> Compensated:
     """Compensate every row of a readings table (uses its optional condition columns)."""
-    d, x, m = table["distance_m"], table["vox_temp_c"], table["measured_temp_c"]
-    if isinstance(model, PaperModel):
-        return model.apply(m, x, d)
-    c = model.conditions
-    amb = table.get("ambient_temp_c", c.ambient_temp_c)
-    rh = table.get("humidity_pct", c.humidity_pct)
-    eps = table.get("emissivity", c.emissivity)
-    temp, flag = np.full(len(table), np.nan), np.zeros(len(table), np.uint8)
-    for a, r in {(float(a), float(r)) for a, r in zip(amb, rh, strict=True)}:
-        sel = (amb == a) & (rh == r)
-        got = model.apply(m[sel], x[sel], d[sel], ambient_c=a, humidity_pct=r, emissivity=eps[sel])
-        temp[sel], flag[sel] = got
-    return Compensated(temp, flag)
+    given = {
+        arg: table[column]
+        for arg, column in (
+            ("ambient_c", "ambient_temp_c"),
+            ("humidity_pct", "humidity_pct"),
+            ("emissivity", "emissivity"),
+        )
+        if column in table
+    }
+    return model.apply(table["measured_temp_c"], table["vox_temp_c"], table["distance_m"], **given)
 
 
 def _check_sweep(table: SweepTable) -> None:

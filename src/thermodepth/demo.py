@@ -46,6 +46,7 @@ from .io.measurements import jsonable
 from .io.pointcloud import write_ply
 from .io.report import Report
 from .pipeline import AlarmSettings, HotspotSettings, Pipeline, RoiSettings, Settings
+from .radiometry import ZERO_C_IN_K
 from .sim import Rig, camera_pose, constant_fpa, default_calibration, plate_scene
 from .sim.protocols import SweepConfig, simulate_sweep, simulate_targets
 from .sweep import SweepTable
@@ -349,7 +350,7 @@ def _inspection(
             plate_scene(chip_temp_c=70.0),
             camera_pose(d),
             start_s=1.0,
-            fpa=constant_fpa(vox + 273.15),
+            fpa=constant_fpa(vox + ZERO_C_IN_K),
             seed=i,
             with_ir=d <= 1.0,
             calibration=default_calibration(),

@@ -13,6 +13,8 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import NDArray
 
+from .radiometry import ZERO_C_IN_K
+
 
 class FfcState(IntEnum):
     """Flat-field correction (shutter) state, as the Lepton telemetry encodes it (IDD)."""
@@ -45,7 +47,7 @@ class Telemetry:
 
     @property
     def fpa_temp_c(self) -> float:
-        return self.fpa_temp_k - 273.15
+        return self.fpa_temp_k - ZERO_C_IN_K
 
     @property
     def in_ffc(self) -> bool:

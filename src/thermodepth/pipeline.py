@@ -18,15 +18,16 @@ NaN, flagged ``SHUTTER``; invalid counts give NaN flagged ``BAD_COUNTS``. The st
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from enum import IntFlag
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .calibration import Calibration, describe_validation_error, read_mapping
 from .compensation import Flag, PaperModel, RadianceModel, load_model
@@ -45,15 +46,16 @@ from .measure import (
     roi_stats,
 )
 from .radiometry import (
+    PAPER_2022,
     PLANCK_PRESETS,
+    RADIOMETRY_METHODS,
     ObjectParams,
     PlanckConstants,
     RadiometryParams,
-    celsius_to_kelvin,
     invalid_counts,
     raw_to_celsius,
 )
-from .registration import DepthOnThermal, Reason, Registration
+from .registration import REGISTRATION_METHODS, DepthOnThermal, Reason, Registration
 
 FloatArray = NDArray[np.float32]
 
@@ -88,22 +90,37 @@ class PlanckSettings(_Strict):
     O: float  # noqa: E741 (the paper's and FLIR's name)
 
 
+def _one_of(choices: Collection[str]) -> AfterValidator:
+    """A pydantic check that a name is one of a ``method=`` registry's keys."""
+
+    def check(name: str) -> str:
+        if name not in choices:
+            raise ValueError(f"choose from {sorted(choices)}")
+        return name
+
+    return AfterValidator(check)
+
+
 class RadiometrySettings(_Strict):
     emissivity: float = Field(default=0.95, gt=0, le=1)
     ambient_temp_c: float = 25.0
     reflected_temp_c: float | None = None
     humidity_pct: float = Field(default=50.0, ge=0, le=100)
-    method: Literal["flir", "thermimage"] = "flir"
-    planck: Literal["paper2022"] | PlanckSettings = "paper2022"
+    method: Annotated[str, _one_of(RADIOMETRY_METHODS)] = "flir"
+    # None: a radiance compensation model's own constants, else paper2022
+    planck: Annotated[str, _one_of(PLANCK_PRESETS)] | PlanckSettings | None = None
 
-    def constants(self) -> PlanckConstants:
+    def constants(self, default: PlanckConstants = PAPER_2022) -> PlanckConstants:
+        """The Planck constants the settings name, or ``default`` when they name none."""
+        if self.planck is None:
+            return default
         if isinstance(self.planck, str):
             return PLANCK_PRESETS[self.planck]
         return PlanckConstants(**self.planck.model_dump())
 
 
 class RegistrationSettings(_Strict):
-    method: Literal["reproject", "paper"] = "reproject"
+    method: Annotated[str, _one_of(REGISTRATION_METHODS)] = "reproject"
     interpolation: Literal["nearest", "bilinear"] = "nearest"
 
 
@@ -275,21 +292,19 @@ class Pipeline:
         self.registration = Registration(calibration, s.registration.method)
         self.model = load_model(s.compensation) if s.compensation is not None else None
         r = s.radiometry
-        self.ambient_c = r.ambient_temp_c
-        ambient_k = float(celsius_to_kelvin(r.ambient_temp_c))
-        reflected_k = float(
-            celsius_to_kelvin(
-                r.reflected_temp_c if r.reflected_temp_c is not None else r.ambient_temp_c
+        radiance = self.model if isinstance(self.model, RadianceModel) else None
+        planck = r.constants(radiance.planck if radiance else PAPER_2022)
+        if radiance and (r.method != "flir" or planck != radiance.planck):
+            # its counts model was fitted through single-pass radiometry with its own constants
+            raise InputError(
+                f"{s.compensation}: a radiance compensation model carries its own radiometry "
+                "(method flir and the Planck constants it was fitted with); leave "
+                "radiometry.method and radiometry.planck out of the settings"
             )
-        )
         self.params = RadiometryParams(
-            planck=r.constants(),
-            obj=ObjectParams(
-                emissivity=r.emissivity,
-                distance_m=0.0,
-                reflected_temp_k=reflected_k,
-                atmosphere_temp_k=ambient_k,
-                relative_humidity=r.humidity_pct / 100.0,
+            planck=planck,
+            obj=ObjectParams.from_celsius(
+                r.emissivity, 0.0, r.ambient_temp_c, r.humidity_pct, r.reflected_temp_c
             ),
         )
         self.rois = [roi.roi() for roi in s.rois]
@@ -320,7 +335,13 @@ class Pipeline:
         method = r.method
         if isinstance(self.model, RadianceModel):
             temp, flags = self.model.apply_counts(
-                c, vox_c, distance_m, r.ambient_temp_c, r.humidity_pct, r.emissivity
+                c,
+                vox_c,
+                distance_m,
+                r.ambient_temp_c,
+                r.humidity_pct,
+                r.emissivity,
+                r.reflected_temp_c,
             )
         elif isinstance(self.model, PaperModel):
             measured = raw_to_celsius(c, self.params, method)  # no distance correction
@@ -386,7 +407,7 @@ class Pipeline:
             s.hotspots.threshold_c,
             cal.thermal,
             cal.thermal_from_depth,
-            self.ambient_c,
+            s.radiometry.ambient_temp_c,
             s.radiometry.emissivity,
             frame.flags_thermal,
             s.hotspots.min_thermal_px,

@@ -263,11 +263,11 @@ def atmospheric_transmission(
 
 @dataclass(frozen=True, eq=False)
 class ObjectParams:
-    """What lies between the object and the detector, SI units.
+    """What lies between the object and the detector, SI units; every field a scalar or an
+    array that broadcasts with the counts (a per-pixel map, or one value per table row).
 
-    emissivity: object emissivity in (0, 1], scalar or per-pixel array;
-    distance_m: object distance in metres (>= 0), scalar or per-pixel array (the range, i.e.
-    the length of the air path);
+    emissivity: object emissivity in (0, 1];
+    distance_m: object distance in metres (>= 0; the range, i.e. the length of the air path);
     reflected_temp_k: apparent temperature of the surroundings the object reflects;
     atmosphere_temp_k: air temperature; relative_humidity: fraction in [0, 1];
     window_transmission: external window (IRT) in (0, 1], 1 = no window; window_temp_k.
@@ -275,26 +275,56 @@ class ObjectParams:
 
     emissivity: float | FloatArray = 1.0
     distance_m: float | FloatArray = 0.0
-    reflected_temp_k: float = 293.15
-    atmosphere_temp_k: float = 293.15
-    relative_humidity: float = 0.5
+    reflected_temp_k: float | FloatArray = 293.15
+    atmosphere_temp_k: float | FloatArray = 293.15
+    relative_humidity: float | FloatArray = 0.5
     window_transmission: float = 1.0
     window_temp_k: float = 293.15
 
     def __post_init__(self) -> None:
-        e = np.asarray(self.emissivity, dtype=np.float64)
-        if np.any((e <= 0) | (e > 1)):
+        def outside(value: float | FloatArray, lo: float, hi: float, lo_open: bool) -> bool:
+            v = np.asarray(value, dtype=np.float64)
+            return bool(np.any(((v <= lo) if lo_open else (v < lo)) | (v > hi)))
+
+        if outside(self.emissivity, 0.0, 1.0, True):
             raise ValueError("emissivity must be in (0, 1]")
-        if not 0.0 <= self.relative_humidity <= 1.0:
+        if outside(self.relative_humidity, 0.0, 1.0, False):
             raise ValueError(
                 f"relative_humidity is a fraction in [0, 1], got {self.relative_humidity} "
                 "(percent? divide by 100)"
             )
-        if not 0.0 < self.window_transmission <= 1.0:
+        if outside(self.window_transmission, 0.0, 1.0, True):
             raise ValueError("window_transmission must be in (0, 1]")
         for name in ("reflected_temp_k", "atmosphere_temp_k", "window_temp_k"):
-            if not getattr(self, name) > 0:
+            if outside(getattr(self, name), 0.0, np.inf, True):
                 raise ValueError(f"{name} must be a positive temperature in kelvin")
+
+    @classmethod
+    def from_celsius(
+        cls,
+        emissivity: ArrayLike,
+        distance_m: ArrayLike,
+        ambient_c: ArrayLike,
+        humidity_pct: ArrayLike,
+        reflected_c: ArrayLike | None = None,
+    ) -> ObjectParams:
+        """Object parameters in the units people give them: air temperature (C), relative
+        humidity (%) and the reflected surroundings' temperature (C; the air's unless given).
+        Arrays broadcast as in the constructor."""
+
+        def value(a: ArrayLike) -> float | FloatArray:  # plain floats stay floats
+            a = np.asarray(a, dtype=np.float64)
+            return float(a) if a.ndim == 0 else a
+
+        return cls(
+            emissivity=value(emissivity),
+            distance_m=value(distance_m),
+            reflected_temp_k=value(
+                celsius_to_kelvin(ambient_c if reflected_c is None else reflected_c)
+            ),
+            atmosphere_temp_k=value(celsius_to_kelvin(ambient_c)),
+            relative_humidity=value(np.asarray(humidity_pct, dtype=np.float64) / 100.0),
+        )
 
 
 @dataclass(frozen=True, eq=False)

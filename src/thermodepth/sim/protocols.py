@@ -82,17 +82,10 @@ def simulate_sweep(
     """
     config = config or SweepConfig()
     lepton = lepton or LeptonModel()
-    k = ZERO_C_IN_K
-    ambient_k = config.ambient_temp_c + k
-    rh = config.humidity_pct / 100.0
     params = RadiometryParams(
         planck=lepton.planck,
-        obj=ObjectParams(
-            emissivity=config.emissivity,
-            distance_m=0.0,
-            reflected_temp_k=ambient_k,
-            atmosphere_temp_k=ambient_k,
-            relative_humidity=rh,
+        obj=ObjectParams.from_celsius(
+            config.emissivity, 0.0, config.ambient_temp_c, config.humidity_pct
         ),
     )
     rows: dict[str, list[float]] = {
@@ -112,7 +105,9 @@ def simulate_sweep(
     rng = np.random.default_rng(config.seed)
     for plate_c in config.plate_temps_c:
         scene = plate_scene(
-            plate_temp_c=plate_c, ambient_temp_c=config.ambient_temp_c, relative_humidity=rh
+            plate_temp_c=plate_c,
+            ambient_temp_c=config.ambient_temp_c,
+            relative_humidity=config.humidity_pct / 100.0,
         )
         for d in config.distances_m:
             rig = Rig(scene, camera_pose(d), lepton=lepton)
