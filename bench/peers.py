@@ -397,9 +397,7 @@ def registration_tolerance(
     """The occlusion tolerance of :class:`thermodepth.registration.Registration` as a
     function of Z in the thermal frame (metres): n_sigma sigma_z(Z) + slope Z / fx_thermal
     with sigma_z = Z^2 subpixel / (fx_depth baseline) (``OcclusionTolerance``)."""
-    tol = tolerance or OcclusionTolerance()
-    a = tol.n_sigma * tol.subpixel / (calibration.depth.fx * tol.stereo_baseline_m)
-    b = tol.slope / calibration.thermal.fx
+    a, b = (tolerance or OcclusionTolerance()).coefficients(calibration)
 
     def tolerance_m(z: F64) -> F64:
         return a * z * z + b * z

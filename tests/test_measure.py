@@ -36,7 +36,7 @@ def test_roi_masks_and_stats() -> None:
     assert near.sum() == 49  # the NaN pixel is in no range
     temp = np.arange(200, dtype=float).reshape(shape)
     temp[3, 2] = np.nan
-    s = roi_stats("r", temp, rect, np.where(rect, 2, 0).astype(np.uint8))
+    s = roi_stats("r", temp, rect, np.array([0, 2, 0], np.uint8))
     assert s.n == 7 and s.max_c == 85.0 and s.min_c == 63.0 and s.flags == 2
     empty = roi_stats("e", temp, np.zeros(shape, bool))
     assert empty.n == 0 and np.isnan(empty.mean_c)

@@ -28,7 +28,7 @@ from thermodepth.pipeline import (
     RoiSettings,
     Settings,
 )
-from thermodepth.registration import Reason
+from thermodepth.registration import Reason, Registration
 from thermodepth.sim import Rig, camera_pose, constant_fpa, plate_scene
 
 runner = CliRunner()
@@ -98,6 +98,20 @@ def test_compensation_in_the_pipeline_removes_the_vox_effect(model_path: Path) -
     assert compensated == pytest.approx([39.0, 39.0], abs=0.1)
 
 
+def test_pipelines_share_a_registration() -> None:
+    rig = inspection_rig(1.0)
+    pair = rig.frame()
+    shared = Registration(rig.calibration)
+    a = Pipeline(Settings(), rig.calibration, shared).process(pair)
+    b = Pipeline(Settings(), rig.calibration).process(pair)
+    np.testing.assert_array_equal(a.temp_depth_c, b.temp_depth_c)
+    with pytest.raises(ValueError, match="another calibration or method"):
+        Pipeline(Settings(), rig.calibration, Registration(rig.calibration, "paper"))
+    other = replace(rig.calibration, depth_scale_m=0.0001)
+    with pytest.raises(ValueError, match="another calibration or method"):
+        Pipeline(Settings(), other, shared)
+
+
 def test_reflected_temperature_reaches_every_compensation(model_path: Path, tmp_path: Path) -> None:
     # the plate (emissivity 0.95) reflects 5% of its surroundings: hotter surroundings must
     # lower the temperature read from the same counts, with or without a model
@@ -135,13 +149,17 @@ def test_vox_outside_the_model_is_flagged_on_measurements(model_path: Path) -> N
         Settings(
             compensation=model_path,
             hotspots=HotspotSettings(threshold_c=50),
-            rois=[RoiSettings(name="all", rect=(0, 0, 1280, 720))],
+            rois=[
+                RoiSettings(name="all", rect=(0, 0, 1280, 720)),
+                RoiSettings(name="corner", rect=(0, 0, 20, 20)),  # outside the thermal view
+            ],
         ),
         rig.calibration,
     )
     frame = pipe.process(rig.frame())
     assert frame.hotspots and all(h.flags & Flag.VOX_OUTSIDE for h in frame.hotspots)
     assert frame.rois[0].flags & Flag.VOX_OUTSIDE
+    assert frame.rois[1].n == 0 and frame.rois[1].flags == 0
 
 
 def test_shutter_frame_and_bad_counts_keep_the_stream_going() -> None:

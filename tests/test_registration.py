@@ -187,6 +187,27 @@ def test_paper_method_both_directions() -> None:
 
 
 @pytest.mark.parametrize("method", ["reproject", "paper"])
+@pytest.mark.parametrize("interpolation", ["nearest", "bilinear"])
+def test_thermal_index_is_the_pixel_each_depth_pixel_sees(method: str, interpolation: str) -> None:
+    rig = Rig(occlusion_scene(), IDENTITY)
+    frame = rig.frame()
+    reg = Registration(rig.calibration, method=method)
+    index = np.full((H, W), 7, np.int32)
+    values, reason = reg.thermal_to_depth(
+        frame.depth, frame.thermal, interpolation, thermal_index=index
+    )
+    picked, _ = reg.thermal_to_depth(frame.depth, INDEX)  # the pixel index as the image
+    ok = reason == Reason.OK
+    assert ok.mean() > 0.3 and (reason == Reason.OCCLUDED).any() == (method == "reproject")
+    np.testing.assert_array_equal(index[ok], picked[ok].astype(np.int32))
+    assert np.all(index[~ok] == -1)
+    if interpolation == "nearest":  # the values are those of the indexed pixels
+        np.testing.assert_array_equal(values[ok], frame.thermal.ravel()[index[ok]])
+    with pytest.raises(ValueError, match="thermal_index must be a C-contiguous int32"):
+        reg.thermal_to_depth(frame.depth, INDEX, thermal_index=np.empty((H, W), np.int64))
+
+
+@pytest.mark.parametrize("method", ["reproject", "paper"])
 def test_all_zero_depth_gives_all_nan_without_warnings(method: str) -> None:
     # pytest turns RuntimeWarning into an error (pyproject), so none may escape
     reg = Registration(CAL, method=method)

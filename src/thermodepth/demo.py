@@ -47,6 +47,7 @@ from .io.pointcloud import write_ply
 from .io.report import Report
 from .pipeline import AlarmSettings, HotspotSettings, Pipeline, RoiSettings, Settings
 from .radiometry import ZERO_C_IN_K
+from .registration import Registration
 from .sim import Rig, camera_pose, constant_fpa, default_calibration, plate_scene
 from .sim.protocols import SweepConfig, simulate_sweep, simulate_targets
 from .sweep import SweepTable
@@ -342,6 +343,7 @@ def _inspection(
         if model is not None:
             save_model(model, out / f"{name}.json")
     vox_cycle = (26.0, 38.0, 31.0, 36.0, 28.0, 40.0)
+    registration = Registration(cal)  # shared by every pipeline below
     rows: list[list[Any]] = []
     results = []
     for i, d in enumerate(config.inspection_m):
@@ -366,7 +368,7 @@ def _inspection(
                 rois=[RoiSettings(name="plate", depth_range_m=(d - 0.05, d + 0.05))],
                 alarms=[AlarmSettings(name="chip-above-60C", above_c=60.0, for_frames=3)],
             )
-            pipe = Pipeline(settings, cal)  # the calibration recovered in step 1
+            pipe = Pipeline(settings, cal, registration)  # calibration from step 1
             frames = [pipe.process(p) for p in pairs]
             last = frames[-1]
             plate = float(np.nanmedian(last.temp_depth_c[patch]))

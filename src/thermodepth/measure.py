@@ -100,10 +100,11 @@ class RoiStats:
 def roi_stats(
     name: str, temp_c: FloatArray, mask: BoolArray, flags: NDArray[np.uint8] | None = None
 ) -> RoiStats:
-    """Mean, max, min and SD of finite ``temp_c`` inside ``mask`` (same shape)."""
+    """Mean, max, min and SD of finite ``temp_c`` inside ``mask`` (same shape); ``flags``
+    (any shape): those of the pixels the ROI draws on, OR-ed into its flag."""
     values = temp_c[mask]
     values = values[np.isfinite(values)]
-    flag = int(np.bitwise_or.reduce(flags[mask], initial=0)) if flags is not None else 0
+    flag = int(np.bitwise_or.reduce(flags, axis=None, initial=0)) if flags is not None else 0
     if values.size == 0:
         nan = float("nan")
         return RoiStats(name, 0, nan, nan, nan, nan, flag)

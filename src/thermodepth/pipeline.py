@@ -55,7 +55,7 @@ from .radiometry import (
     invalid_counts,
     raw_to_celsius,
 )
-from .registration import REGISTRATION_METHODS, DepthOnThermal, Reason, Registration
+from .registration import REGISTRATION_METHODS, Reason, Registration
 
 FloatArray = NDArray[np.float32]
 
@@ -216,6 +216,8 @@ class FusedFrame:
     Depth grid (H, W): temp_depth_c (C, NaN where reason_depth != Reason.OK), reason_depth
     (:class:`~thermodepth.registration.Reason`), depth (the raw uint16 frame).
     Measurements: hotspots (hottest first), rois, events (alarms raised or cleared).
+    thermal_index_depth (when the settings have ROIs): the flat thermal index each depth pixel
+    sees, int32 (H, W), -1 where none.
     """
 
     index: int
@@ -235,6 +237,7 @@ class FusedFrame:
     rois: list[RoiStats] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
     ir: NDArray[np.uint8] | None = None
+    thermal_index_depth: NDArray[np.int32] | None = None
 
     @cached_property
     def depth_m(self) -> FloatArray:
@@ -275,10 +278,15 @@ class Pipeline:
 
     calibration: overrides ``settings.calibration`` (e.g. the one a source or recording
     carries). Raises InputError when neither gives one, or a frame's size does not match it.
+    registration: one to share between pipelines of the same calibration and registration
+    method (building one takes ~50 ms).
     """
 
     def __init__(
-        self, settings: Settings | None = None, calibration: Calibration | None = None
+        self,
+        settings: Settings | None = None,
+        calibration: Calibration | None = None,
+        registration: Registration | None = None,
     ) -> None:
         self.settings = s = settings or Settings()
         if calibration is None:
@@ -289,7 +297,13 @@ class Pipeline:
                 )
             calibration = Calibration.load(s.calibration)
         self.calibration = calibration
-        self.registration = Registration(calibration, s.registration.method)
+        if registration is None:
+            registration = Registration(calibration, s.registration.method)
+        elif registration.method != s.registration.method or (
+            registration.calibration != calibration
+        ):
+            raise ValueError("the shared registration is of another calibration or method")
+        self.registration = registration
         self.model = load_model(s.compensation) if s.compensation is not None else None
         r = s.radiometry
         radiance = self.model if isinstance(self.model, RadianceModel) else None
@@ -308,6 +322,11 @@ class Pipeline:
             ),
         )
         self.rois = [roi.roi() for roi in s.rois]
+        # fixed shapes on the depth grid: their masks once (depth ranges change each frame)
+        self._roi_masks = [
+            None if isinstance(roi, DepthRangeRoi) else roi.mask(calibration.depth.shape)
+            for roi in self.rois
+        ]
         self.alarms = AlarmTracker(
             [AlarmRule(a.name, a.above_c, a.for_frames, a.what) for a in s.alarms]
         )
@@ -374,8 +393,10 @@ class Pipeline:
         else:
             temp, flags = self.temperatures(pair.thermal, vox_c, distance)
         flags |= np.where(missing, np.uint8(PixelFlag.NO_DISTANCE), np.uint8(0))
+        # with ROIs, which thermal pixel each depth pixel sees: their flags follow it
+        index = np.empty(pair.depth.shape, np.int32) if self.rois else None
         temp_depth, reason = self.registration.thermal_to_depth(
-            pair.depth, temp, s.registration.interpolation, nearest=near
+            pair.depth, temp, s.registration.interpolation, nearest=near, thermal_index=index
         )
         frame = FusedFrame(
             pair.index,
@@ -392,6 +413,7 @@ class Pipeline:
             pair.depth,
             self.calibration,
             ir=pair.ir,
+            thermal_index_depth=index,
         )
         if not frame.in_ffc:  # measurements never use the shutter's image
             self.measure(frame)
@@ -412,20 +434,14 @@ class Pipeline:
             frame.flags_thermal,
             s.hotspots.min_thermal_px,
         )
-        shape = cal.depth.shape
         frame.rois = []
-        if self.rois:
-            # each ROI carries the flags of the thermal pixels it sees (one more pass)
-            near = DepthOnThermal(frame.z_thermal_m, frame.range_thermal_m)
-            mapped = self.registration.thermal_to_depth(
-                frame.depth, frame.flags_thermal.astype(np.float32), nearest=near
-            ).values
-            flags_depth = np.nan_to_num(mapped, nan=0.0).astype(np.uint8)
-        for roi in self.rois:
-            depth_m = frame.depth_m if isinstance(roi, DepthRangeRoi) else None
-            frame.rois.append(
-                roi_stats(roi.name, frame.temp_depth_c, roi.mask(shape, depth_m), flags_depth)
-            )
+        flags, index = frame.flags_thermal.ravel(), frame.thermal_index_depth
+        for roi, mask in zip(self.rois, self._roi_masks, strict=True):
+            if mask is None:
+                mask = roi.mask(cal.depth.shape, frame.depth_m)
+            seen = index[mask] if index is not None else np.empty(0, np.int32)
+            stats = roi_stats(roi.name, frame.temp_depth_c, mask, flags[seen[seen >= 0]])
+            frame.rois.append(stats)
         frame.events = self.alarms.update(
             frame.thermal_time_s, frame.index, frame.hotspots, frame.rois
         )

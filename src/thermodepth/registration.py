@@ -30,6 +30,7 @@ from enum import IntEnum
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import cv2
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -232,8 +233,11 @@ def _sample(
     n_chunks,
     out,
     reason,
+    want_index,
+    index,
 ):  # pragma: no cover - JIT
-    # table (h_t * w_t, 2): each thermal pixel's value and nearest Z side by side (one load)
+    # table (h_t * w_t, 2): each thermal pixel's value and nearest Z side by side (one load);
+    # index (H, W) gets the flat thermal index each depth pixel took (-1: none) if want_index
     h, w = depth.shape
     h_t, w_t = thermal.shape
     nan = np.float32(np.nan)
@@ -280,6 +284,13 @@ def _sample(
                 _bilinear_row(
                     ut[:n], vt[:n], zt[:n], rrow, orow, table, thermal, tol_sigma, tol_slope
                 )
+            if want_index:
+                irow = index[v]
+                irow[:u0] = -1
+                irow[u1:] = -1
+                iin = irow[u0:u1]
+                for u in range(n):
+                    iin[u] = idx[u] if rrow[u] == Reason.OK else -1
 
 
 @numba.njit(inline="always", **_JIT)
@@ -341,6 +352,14 @@ class OcclusionTolerance:
     stereo_baseline_m: float = 0.050
     slope: float = 2.0
 
+    def coefficients(self, calibration: Calibration) -> tuple[float, float]:
+        """(a, b) of the tolerance a z^2 + b z (metres, z in metres) for a calibration."""
+        fx_depth, fx_thermal = calibration.depth.fx, calibration.thermal.fx
+        return (
+            self.n_sigma * self.subpixel / (fx_depth * self.stereo_baseline_m),
+            self.slope / fx_thermal,
+        )
+
 
 class Registration:
     """Maps between the depth grid (H, W) and the thermal grid (h, w) of one calibration.
@@ -364,25 +383,23 @@ class Registration:
         self.method = method
         self.tolerance = tolerance or OcclusionTolerance()
         self.paper_reference_m = paper_reference_m
-        d, t = calibration.depth, calibration.thermal
+        t = calibration.thermal
+        self._scale = np.float32(calibration.depth_scale_m)
+        if method == "paper":
+            self._paper = _PaperMaps.fit(calibration, paper_reference_m)
+            return
         self._rays = _ray_terms(calibration)
         tr = calibration.thermal_from_depth.translation_m
         self._geo = np.array(
             [*tr, t.fx, t.fy, t.cx, t.cy, *t.distortion, min(t.max_radius2, 1e30)], dtype=np.float32
         )
-        self._scale = np.float32(calibration.depth_scale_m)
-        tol = self.tolerance
-        self._tol_sigma = np.float32(tol.n_sigma * tol.subpixel / (d.fx * tol.stereo_baseline_m))
-        self._tol_slope = np.float32(tol.slope / t.fx)
+        self._tol_sigma, self._tol_slope = map(np.float32, self.tolerance.coefficients(calibration))
         self._n_chunks = max(1, numba.get_num_threads())
-        self._span_lo = np.empty((d.height, _W_SAMPLES), dtype=np.int32)
+        self._span_lo = np.empty((calibration.depth.height, _W_SAMPLES), dtype=np.int32)
         self._span_hi = np.empty_like(self._span_lo)
         _view_table(
             self._scale, *self._rays, self._geo, t.width, t.height, self._span_lo, self._span_hi
         )
-        if method == "paper":
-            self._paper_affine = _fit_paper_map(calibration, paper_reference_m)
-            self._paper = _paper_sampling_maps(calibration, self._paper_affine)
 
     @classmethod
     def from_file(
@@ -448,7 +465,7 @@ class Registration:
         """
         depth = self._check_depth(depth)
         if self.method == "paper":
-            return self._paper_depth_to_thermal(depth)
+            return self._paper.depth_to_thermal(depth)
         zbuf, rbuf = self._zbuffer(depth)
         seen = np.isfinite(zbuf)
         nan = np.float32(np.nan)
@@ -465,6 +482,7 @@ class Registration:
         thermal: NDArray[np.generic],
         interpolation: str = "nearest",
         nearest: DepthOnThermal | None = None,
+        thermal_index: NDArray[np.int32] | None = None,
     ) -> ThermalOnDepth:
         """The thermal value seen at every depth pixel.
 
@@ -472,8 +490,11 @@ class Registration:
         temperatures). interpolation: ``"nearest"`` or ``"bilinear"`` (over the neighbours
         that see the same surface). nearest: :meth:`depth_to_thermal` of this same depth
         frame, if already computed: its Z is the z-buffer of the occlusion test, which is
-        then not computed again. Returns float32 (H, W) values, NaN where
-        ``reason != Reason.OK`` (invalid depth, outside the thermal image, occluded).
+        then not computed again. thermal_index: an int32 (H, W) array to fill with the flat
+        index (v * w + u) of the thermal pixel each depth pixel sees (the nearest one), -1
+        where ``reason != Reason.OK``, so other thermal-grid data (flags) can follow without
+        a second pass. Returns float32 (H, W) values, NaN where ``reason != Reason.OK``
+        (invalid depth, outside the thermal image, occluded).
         """
         depth = self._check_depth(depth)
         therm = self._check_thermal(thermal)
@@ -481,8 +502,17 @@ class Registration:
             raise ValueError(
                 f"interpolation must be 'nearest' or 'bilinear', got {interpolation!r}"
             )
+        if thermal_index is not None and (
+            thermal_index.shape != depth.shape
+            or thermal_index.dtype != np.int32
+            or not thermal_index.flags.c_contiguous
+        ):
+            raise ValueError(
+                f"thermal_index must be a C-contiguous int32 array of shape {depth.shape}, "
+                f"got {_describe(thermal_index)}"
+            )
         if self.method == "paper":
-            return self._paper_thermal_to_depth(depth, therm, interpolation)
+            return self._paper.thermal_to_depth(depth, therm, interpolation, thermal_index)
         if nearest is None:
             zbuf = self._zbuffer(depth)[0]
         else:
@@ -505,6 +535,8 @@ class Registration:
             self._n_chunks,
             out,
             reason,
+            thermal_index is not None,
+            thermal_index if thermal_index is not None else np.empty((1, 1), np.int32),
         )
         return ThermalOnDepth(out, reason)
 
@@ -512,46 +544,80 @@ class Registration:
 
     def thermal_pixel_of_depth(self) -> tuple[FloatArray, FloatArray]:
         """``"paper"``: the raw thermal (u, v) each depth pixel samples, float32 (H, W) each."""
-        return self._paper
+        return self._paper.map_u, self._paper.map_v
 
-    def _paper_thermal_to_depth(
-        self, depth: NDArray[np.uint16], therm: FloatArray, interpolation: str
+
+class _PaperMaps:
+    """The paper's registration (section 2.2) as fixed lookups: a crop/offset + upscale from
+    depth pixels to undistorted thermal pixels, u_t = a_u u + b_u, v_t = a_v v + b_v. All
+    that does not depend on the frame is computed here, once."""
+
+    def __init__(self, cal: Calibration, affine: tuple[float, float, float, float]) -> None:
+        d, t = cal.depth, cal.thermal
+        self.affine = affine
+        a_u, b_u, a_v, b_v = affine
+        # depth -> thermal: the raw thermal (u, v) each depth pixel samples (undistorting the
+        # thermal image = sampling it at the distorted position)
+        u, v = d.pixel_grid()
+        xd, yd = distort((a_u * u + b_u - t.cx) / t.fx, (a_v * v + b_v - t.cy) / t.fy, t.distortion)
+        self.map_u = (t.fx * xd + t.cx).astype(np.float32)
+        self.map_v = (t.fy * yd + t.cy).astype(np.float32)
+        self.inside = t.contains(np.stack([self.map_u, self.map_v], axis=-1))
+        nearest = np.rint(self.map_v) * t.width + np.rint(self.map_u)
+        self.index = np.where(self.inside, nearest, -1).astype(np.int32)
+        # thermal -> depth: the depth pixel the upscale puts on each thermal pixel's centre
+        x, y = pixel_rays(t)
+        cols = np.rint((t.fx * x + t.cx - b_u) / a_u).astype(np.int64)
+        rows = np.rint((t.fy * y + t.cy - b_v) / a_v).astype(np.int64)
+        self.seen = (cols >= 0) & (cols < d.width) & (rows >= 0) & (rows < d.height)
+        self.source = np.where(self.seen, rows * d.width + cols, 0)
+        xs, ys = d.normalized_from_pixels(np.stack([cols, rows], axis=-1))
+        self.range_per_z = np.sqrt(xs * xs + ys * ys + 1).astype(np.float32)
+        self.scale = np.float32(cal.depth_scale_m)
+
+    @classmethod
+    def fit(cls, cal: Calibration, distance_m: float) -> _PaperMaps:
+        """The maps with the affine fitted (least squares) to the exact mapping of a plane at
+        ``distance_m`` (the paper sets it by hand at its working distance)."""
+        d, t = cal.depth, cal.thermal
+        u, v = d.pixel_grid()
+        uu, vv = u[::8, ::8], v[::8, ::8]
+        pts = cal.thermal_from_depth.apply(d.deproject(np.stack([uu, vv], -1), distance_m))
+        x, y = pts[..., 0] / pts[..., 2], pts[..., 1] / pts[..., 2]
+        und_u, und_v = t.fx * x + t.cx, t.fy * y + t.cy
+        ok = t.contains(np.stack([und_u, und_v], axis=-1))
+        a_u, b_u = np.polyfit(uu[ok], und_u[ok], 1)
+        a_v, b_v = np.polyfit(vv[ok], und_v[ok], 1)
+        return cls(cal, (float(a_u), float(b_u), float(a_v), float(b_v)))
+
+    def thermal_to_depth(
+        self,
+        depth: NDArray[np.uint16],
+        therm: FloatArray,
+        interpolation: str,
+        thermal_index: NDArray[np.int32] | None,
     ) -> ThermalOnDepth:
-        import cv2
-
-        map_u, map_v = self._paper
-        t = self.calibration.thermal
+        """See :meth:`Registration.thermal_to_depth` (no occlusion test: the paper has none)."""
         flag = cv2.INTER_NEAREST if interpolation == "nearest" else cv2.INTER_LINEAR
-        out = np.asarray(
-            cv2.remap(
-                therm, map_u, map_v, flag, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan
-            ),
-            dtype=np.float32,
+        out = cv2.remap(
+            therm, self.map_u, self.map_v, flag, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan
         )
-        inside = (
-            (map_u >= -0.5) & (map_u < t.width - 0.5) & (map_v >= -0.5) & (map_v < t.height - 0.5)
-        )
+        valid = depth != 0
         reason = np.where(
-            depth == 0, Reason.INVALID_DEPTH, np.where(inside, Reason.OK, Reason.OUTSIDE)
+            valid, np.where(self.inside, Reason.OK, Reason.OUTSIDE), Reason.INVALID_DEPTH
         ).astype(np.uint8)
-        out[reason != Reason.OK] = np.nan
-        return ThermalOnDepth(out, reason)
+        ok = valid & self.inside
+        out[~ok] = np.nan
+        if thermal_index is not None:
+            np.copyto(thermal_index, np.where(ok, self.index, np.int32(-1)))
+        return ThermalOnDepth(np.asarray(out, dtype=np.float32), reason)
 
-    def _paper_depth_to_thermal(self, depth: NDArray[np.uint16]) -> DepthOnThermal:
-        # each thermal pixel reads the depth pixel the upscale puts on its centre
-        d, t = self.calibration.depth, self.calibration.thermal
-        a_u, b_u, a_v, b_v = self._paper_affine
-        x, y = t.normalized_from_pixels(np.stack(t.pixel_grid(), axis=-1))
-        cols = np.rint((t.fx * x + t.cx - b_u) / a_u).astype(int)
-        rows = np.rint((t.fy * y + t.cy - b_v) / a_v).astype(int)
-        ok = (cols >= 0) & (cols < d.width) & (rows >= 0) & (rows < d.height)
-        units = np.zeros(t.shape, dtype=np.float32)
-        units[ok] = depth[rows[ok], cols[ok]]
-        ok &= units > 0
-        z = np.where(ok, units * self._scale, np.float32(np.nan)).astype(np.float32)
-        xd, yd = d.normalized_from_pixels(np.stack([cols, rows], axis=-1))
-        rng = (z * np.sqrt(xd * xd + yd * yd + 1)).astype(np.float32)
-        return DepthOnThermal(z, rng)
+    def depth_to_thermal(self, depth: NDArray[np.uint16]) -> DepthOnThermal:
+        """See :meth:`Registration.depth_to_thermal`: Z (and range) in the depth camera's
+        frame of the depth pixel under each thermal pixel's centre."""
+        units = np.where(self.seen, depth.ravel()[self.source], 0)
+        z = np.where(units > 0, units * self.scale, np.float32(np.nan)).astype(np.float32)
+        return DepthOnThermal(z, z * self.range_per_z)
 
 
 def _describe(a: object) -> str:
@@ -581,33 +647,3 @@ def _ray_terms(cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray, Fl
         for i in range(3)
     ]
     return a[0], a[1], a[2], np.zeros((d.height, 3), dtype=np.float32)
-
-
-def _fit_paper_map(cal: Calibration, distance_m: float) -> tuple[float, float, float, float]:
-    """The paper's crop/offset + upscale, u = a_u u_d + b_u, v = a_v v_d + b_v from depth
-    pixels to undistorted thermal pixels, fitted (least squares) to the exact mapping of a
-    plane at ``distance_m``."""
-    d, t = cal.depth, cal.thermal
-    u, v = d.pixel_grid()
-    uu, vv = u[::8, ::8], v[::8, ::8]
-    pts = cal.thermal_from_depth.apply(d.deproject(np.stack([uu, vv], -1), distance_m))
-    x, y = pts[..., 0] / pts[..., 2], pts[..., 1] / pts[..., 2]
-    und_u, und_v = t.fx * x + t.cx, t.fy * y + t.cy
-    ok = t.contains(np.stack([und_u, und_v], axis=-1))
-    a_u, b_u = np.polyfit(uu[ok], und_u[ok], 1)
-    a_v, b_v = np.polyfit(vv[ok], und_v[ok], 1)
-    return float(a_u), float(b_u), float(a_v), float(b_v)
-
-
-def _paper_sampling_maps(
-    cal: Calibration, affine: tuple[float, float, float, float]
-) -> tuple[FloatArray, FloatArray]:
-    """Raw thermal (u, v) sampled by each depth pixel: the affine map into the undistorted
-    thermal image, then the lens distortion (undistorting the image = sampling it there)."""
-    d, t = cal.depth, cal.thermal
-    a_u, b_u, a_v, b_v = affine
-    u, v = d.pixel_grid()
-    x = (a_u * u + b_u - t.cx) / t.fx
-    y = (a_v * v + b_v - t.cy) / t.fy
-    xd, yd = distort(x, y, t.distortion)
-    return ((t.fx * xd + t.cx).astype(np.float32), (t.fy * yd + t.cy).astype(np.float32))
