@@ -19,6 +19,7 @@ from thermodepth.evaluation import compensation_generalisation
 from thermodepth.figures import plot_overlay
 from thermodepth.frames import FramePair
 from thermodepth.io.pointcloud import read_ply, write_ply
+from thermodepth.measure import hotspot_box_on_depth
 from thermodepth.pipeline import (
     HotspotSettings,
     Pipeline,
@@ -76,6 +77,14 @@ def test_inspection_frame_at_half_a_metre() -> None:
     assert h.distance_m == pytest.approx(np.linalg.norm(truth_centre), abs=0.01)
     # 2 x 2 cm chip = 4 cm^2; the region above 50 C includes some of the optics' halo
     assert 4e-4 < h.area_m2 < 6e-4
+    # its box on the depth image holds the chip's centre and is about the chip's size
+    cal = rig.calibration
+    box = hotspot_box_on_depth(h, frame.z_thermal_m, cal.thermal, cal.depth, cal.thermal_from_depth)
+    assert box is not None
+    cu, cv = cal.depth.project(truth_centre)
+    chip_px = 0.02 * cal.depth.fx / truth_centre[2]
+    assert box[0] < cu < box[2] and box[1] < cv < box[3]
+    assert chip_px < box[2] - box[0] < 2 * chip_px and chip_px < box[3] - box[1] < 2 * chip_px
     # the plate's ROI (everything 0.45-0.55 m away): its median is the plate's 39 C
     temps = frame.temp_depth_c[(frame.depth_m > 0.45) & (frame.depth_m < 0.55)]
     assert np.nanmedian(temps) == pytest.approx(39.0, abs=0.1)

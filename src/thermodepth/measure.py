@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .camera import Intrinsics, RigidTransform, corner_rays, pixel_rays
-from .radiometry import STEFAN_BOLTZMANN, celsius_to_kelvin
+from .radiometry import celsius_to_kelvin, stefan_boltzmann_power_w
 
 FloatArray = NDArray[np.floating]
 BoolArray = NDArray[np.bool_]
@@ -122,14 +122,6 @@ def roi_stats(
 # ---------------------------------------------------------------------------------------------
 # Spots
 # ---------------------------------------------------------------------------------------------
-
-
-def spot_at_pixel(temp_depth_c: FloatArray, u: int, v: int) -> float:
-    """Temperature (C) seen at depth pixel (u, v); NaN where none."""
-    h, w = temp_depth_c.shape
-    if not (0 <= u < w and 0 <= v < h):
-        return float("nan")
-    return float(temp_depth_c[v, u])
 
 
 def spot_at_point(
@@ -257,7 +249,8 @@ def find_hotspots(
     n, labels, stats, _ = cv2.connectedComponentsWithStats(hot, connectivity=8)
     depth_from_thermal = _inverse(thermal_from_depth)
     eps_map = np.ndim(emissivity) > 0
-    t_amb4 = float(celsius_to_kelvin(ambient_temp_c)) ** 4
+    ambient_k = celsius_to_kelvin(ambient_temp_c)
+    rx, ry = pixel_rays(thermal)
     out = []
     for k in range(1, n):
         if stats[k, cv2.CC_STAT_AREA] < min_thermal_px:
@@ -270,7 +263,6 @@ def find_hotspots(
         temps = temp_thermal_c[v, u]  # all above the threshold: finite
         z = z_thermal_m[v, u]
         known = np.isfinite(z)
-        rx, ry = pixel_rays(thermal)
         zk = z[known]
         pts_t = np.stack([rx[v[known], u[known]] * zk, ry[v[known], u[known]] * zk, zk], -1)
         plane = _plane(pts_t)
@@ -283,9 +275,9 @@ def find_hotspots(
             w = area[good]
             centroid_t = (pts_t[good] * w[:, None]).sum(axis=0) / w.sum()
             centroid = depth_from_thermal.apply(centroid_t)
-            t4 = celsius_to_kelvin(temps[known][good]) ** 4
             eps = np.asarray(emissivity)[v, u][known][good] if eps_map else float(emissivity)
-            power = float(np.sum(w * eps * STEFAN_BOLTZMANN * (t4 - t_amb4)))
+            surface_k = celsius_to_kelvin(temps[known][good])
+            power = float(np.sum(stefan_boltzmann_power_w(w, eps, surface_k, ambient_k)))
             area_m2 = float(w.sum())
         else:
             centroid = np.full(3, np.nan)
@@ -413,10 +405,8 @@ def hotspot_box_on_depth(
     ok = np.isfinite(z)
     if not ok.any():
         return None
-    offs = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
-    corners = np.stack([u[ok], v[ok]], -1)[:, None, :] + offs[None]
-    pts = thermal.deproject(corners, np.repeat(z[ok][:, None], 4, axis=1))
-    px = depth.project(thermal_from_depth.inverse().apply(pts)).reshape(-1, 2)
+    pts = _pixel_corners(thermal)[v[ok], u[ok]] * z[ok][:, None, None]  # (N, 4, 3)
+    px = depth.project(_inverse(thermal_from_depth).apply(pts)).reshape(-1, 2)
     px = px[np.isfinite(px).all(axis=1)]
     if px.size == 0:
         return None

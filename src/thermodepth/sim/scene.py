@@ -143,11 +143,6 @@ class Rect:
         q = np.concatenate([-one, t, one, -t]) * self.half_v_m
         return self.point_m(s, q)
 
-    def world_from_local(self) -> RigidTransform:
-        """Transform from the rect's (s, q, normal) frame to the world frame."""
-        rot = np.stack([self.axis_u, self.axis_v, self.normal], axis=1)
-        return RigidTransform(rot, self.center_m, "world", self.name or "rect")
-
 
 def box(
     center_m: ArrayLike,
