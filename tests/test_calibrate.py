@@ -26,7 +26,6 @@ from thermodepth.calibrate import (
     load_image,
     match_order,
     plot_report,
-    rotation_angle_deg,
     run_calibration,
     stretch_to_unit,
     upscale_factor,
@@ -168,7 +167,7 @@ def test_simulated_captures_recover_the_true_calibration(
     # (worst 0.18), fx, fy, cx, cy within 0.5 % in 9 (worst 0.56 %), registration in all 10.
     t, tt = cal.thermal_from_depth, truth.thermal_from_depth
     assert np.linalg.norm(t.translation_m - tt.translation_m) < 0.001  # measured 0.93 mm
-    assert rotation_angle_deg(t.rotation @ tt.rotation.T) < 0.1  # measured 0.088 deg
+    assert (t @ tt.inverse()).angle_deg < 0.1  # measured 0.088 deg
     for key in ("fx", "fy", "cx", "cy"):  # measured -0.07, -0.07, 0.14, 0.35 %
         assert getattr(cal.thermal, key) == pytest.approx(getattr(truth.thermal, key), rel=0.005)
     # distortion close to the truth [-0.08, 0.02, 0.0004, -0.0003, 0]: k1 within 0.01 and k2

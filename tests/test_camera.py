@@ -177,3 +177,14 @@ def test_composing_mismatched_frames_raises() -> None:
 def test_transform_rejects_non_rotation() -> None:
     with pytest.raises(ValueError, match="orthonormal"):
         RigidTransform(np.diag([1.0, 1.0, -1.0]), np.zeros(3), "b", "a")
+
+
+def test_angle_distance_and_field_of_view() -> None:
+    # 0.3 rad about a tilted axis, 5 cm apart
+    rot = Rotation.from_rotvec(0.3 * np.array([1.0, 2.0, 2.0]) / 3.0).as_matrix()
+    t = RigidTransform(rot, [0.03, 0.0, -0.04], "b", "a")
+    assert t.angle_deg == pytest.approx(np.degrees(0.3), abs=1e-9)
+    assert t.distance_m == pytest.approx(0.05)
+    assert RigidTransform.identity("b", "a").angle_deg == 0.0
+    assert LEPTON.hfov_deg == pytest.approx(2 * np.degrees(np.arctan(80 / 150.5)))
+    assert 55.5 < LEPTON.hfov_deg < 56.5  # the Lepton 3 datasheet: 56 deg

@@ -44,6 +44,7 @@ from .calibration import (
     Calibration,
     CameraSchema,
     describe_validation_error,
+    intrinsics_of,
     read_mapping,
 )
 from .camera import Intrinsics, RigidTransform
@@ -636,18 +637,12 @@ class StereoFit:
     @property
     def baseline_m(self) -> float:
         """Distance between the optical centres, metres."""
-        return float(np.linalg.norm(self.thermal_from_depth.translation_m))
+        return self.thermal_from_depth.distance_m
 
     @property
     def rotation_deg(self) -> float:
         """Angle of the rotation between the cameras, degrees."""
-        return rotation_angle_deg(self.thermal_from_depth.rotation)
-
-
-def rotation_angle_deg(rotation: FloatArray) -> float:
-    """Angle of a rotation matrix (3, 3), degrees (axis-angle magnitude)."""
-    c = (float(np.trace(rotation)) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+        return self.thermal_from_depth.angle_deg
 
 
 def stereo_calibrate(
@@ -696,16 +691,12 @@ def flag_outliers(errors_px: FloatArray) -> NDArray[np.bool_]:
     ``errors_px`` (n,) or (n, k); True where any column flags the row.
 
     Rule: e > median + 3 x 1.4826 x MAD (MAD scaled to a normal distribution's sigma) and
-    e > 1.5 x median: the first flags what is far off the spread of the others, the second
-    keeps images that are only a little worse when all errors are alike (MAD near 0).
-    """
+    e > 2 x median (``OUTLIER_MEDIAN_RATIO``): the first flags what is far off the spread of
+    the others, the second keeps images that are only a little worse when all errors are
+    alike (MAD near 0)."""
     e = np.asarray(errors_px, dtype=np.float64)
-    if e.ndim == 1:
-        e = e[:, None]
-    med = np.median(e, axis=0)
-    mad = 1.4826 * np.median(np.abs(e - med), axis=0)
-    limit = np.maximum(med + OUTLIER_MAD_K * mad, OUTLIER_MEDIAN_RATIO * med)
-    out: NDArray[np.bool_] = np.any(e > limit, axis=1)
+    e = e[:, None] if e.ndim == 1 else e
+    out: NDArray[np.bool_] = np.any(e > outlier_limits_px(e), axis=1)
     return out
 
 
@@ -865,7 +856,7 @@ def _camera_report(fit: CameraFit) -> dict[str, Any]:
         "distortion": intr.distortion.tolist(),
         "std_fx_fy_cx_cy_px": [None if np.isnan(v) else float(v) for v in fit.std_px],
         "principal_point_offset_px": [intr.cx - cx0, intr.cy - cy0],
-        "hfov_deg": float(np.degrees(2 * np.arctan(intr.width / 2 / intr.fx))),
+        "hfov_deg": intr.hfov_deg,
     }
 
 
@@ -887,10 +878,7 @@ def load_depth_intrinsics(path: str | Path) -> tuple[Intrinsics, float | None]:
     if scale is not None and not (isinstance(scale, int | float) and scale > 0):
         where = "depth." if nested else ""
         raise InputError(f"{path}: {where}depth_scale_m: must be a number > 0 (got {scale!r})")
-    intr = Intrinsics(
-        cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, np.asarray(cam.distortion)
-    )
-    return intr, None if scale is None else float(scale)
+    return intrinsics_of(cam), None if scale is None else float(scale)
 
 
 def _image_size(img: NDArray[Any]) -> tuple[int, int]:

@@ -88,13 +88,15 @@ class CalibrationSchema(_Strict):
     schema_version: int = SCHEMA_VERSION
 
 
-def _intrinsics(cam: CameraSchema) -> Intrinsics:
+def intrinsics_of(cam: CameraSchema) -> Intrinsics:
+    """The :class:`Intrinsics` of a validated camera section."""
     return Intrinsics(
         cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, np.asarray(cam.distortion)
     )
 
 
-def _camera_dict(intr: Intrinsics) -> dict[str, Any]:
+def camera_dict(intr: Intrinsics) -> dict[str, Any]:
+    """A camera section (plain floats, as the file schema has it) of :class:`Intrinsics`."""
     return {
         "width": intr.width,
         "height": intr.height,
@@ -128,8 +130,8 @@ class Calibration:
         except ValidationError as exc:
             raise InputError(f"{source}: {describe_validation_error(exc)}") from None
         return cls(
-            depth=_intrinsics(s.depth),
-            thermal=_intrinsics(s.thermal),
+            depth=intrinsics_of(s.depth),
+            thermal=intrinsics_of(s.thermal),
             depth_scale_m=s.depth.depth_scale_m,
             thermal_from_depth=RigidTransform(
                 np.array(s.thermal_from_depth.rotation),
@@ -142,8 +144,8 @@ class Calibration:
     def to_dict(self) -> dict[str, Any]:
         return {
             "schema_version": SCHEMA_VERSION,
-            "depth": {**_camera_dict(self.depth), "depth_scale_m": float(self.depth_scale_m)},
-            "thermal": _camera_dict(self.thermal),
+            "depth": {**camera_dict(self.depth), "depth_scale_m": float(self.depth_scale_m)},
+            "thermal": camera_dict(self.thermal),
             "thermal_from_depth": {
                 "rotation": self.thermal_from_depth.rotation.tolist(),
                 "translation_m": self.thermal_from_depth.translation_m.tolist(),
@@ -162,7 +164,7 @@ class Calibration:
     @property
     def baseline_m(self) -> float:
         """Distance between the two optical centres, metres."""
-        return float(np.linalg.norm(self.thermal_from_depth.translation_m))
+        return self.thermal_from_depth.distance_m
 
 
 def describe_validation_error(exc: ValidationError) -> str:

@@ -243,6 +243,11 @@ class Intrinsics:
     def has_distortion(self) -> bool:
         return bool(np.any(self.distortion != 0.0))
 
+    @property
+    def hfov_deg(self) -> float:
+        """Horizontal field of view of the pinhole (no distortion), degrees."""
+        return float(np.degrees(2.0 * np.arctan(self.width / 2.0 / self.fx)))
+
     @cached_property
     def max_radius2(self) -> float:
         """Normalised r^2 beyond which projection is refused (distortion would fold)."""
@@ -370,6 +375,17 @@ class RigidTransform:
     @property
     def name(self) -> str:
         return f"{self.to_frame}_from_{self.from_frame}"
+
+    @property
+    def angle_deg(self) -> float:
+        """Angle of the rotation (axis-angle magnitude), degrees."""
+        c = (float(np.trace(self.rotation)) - 1.0) / 2.0
+        return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+    @property
+    def distance_m(self) -> float:
+        """Length of the translation: how far apart the two frames' origins are, metres."""
+        return float(np.linalg.norm(self.translation_m))
 
     @property
     def matrix(self) -> FloatArray:

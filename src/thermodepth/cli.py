@@ -89,20 +89,14 @@ def check_calibration_cmd(
 
 def calibration_summary(cal: Any) -> dict[str, Any]:
     """Human-sized facts about a calibration: sizes, FOVs, baseline mm, rotation deg."""
-    t = cal.thermal_from_depth
-    angle = np.degrees(np.arccos(np.clip((np.trace(t.rotation) - 1) / 2, -1, 1)))
-
-    def hfov(c: Any) -> float:
-        return round(float(np.degrees(2 * np.arctan(c.width / 2 / c.fx))), 2)
-
     return {
         "depth": f"{cal.depth.width}x{cal.depth.height}",
         "thermal": f"{cal.thermal.width}x{cal.thermal.height}",
-        "depth_hfov_deg": hfov(cal.depth),
-        "thermal_hfov_deg": hfov(cal.thermal),
+        "depth_hfov_deg": round(cal.depth.hfov_deg, 2),
+        "thermal_hfov_deg": round(cal.thermal.hfov_deg, 2),
         "depth_scale_m": cal.depth_scale_m,
         "baseline_mm": round(cal.baseline_m * 1000, 3),
-        "rotation_deg": round(float(angle), 4),
+        "rotation_deg": round(cal.thermal_from_depth.angle_deg, 4),
     }
 
 

@@ -159,7 +159,7 @@ def _calibration(
     centre_err_mm = 1000 * float(
         np.linalg.norm(t_true.inverse().translation_m - t_got.inverse().translation_m)
     )
-    rot_err_deg = calibrate.rotation_angle_deg(t_true.rotation.T @ t_got.rotation)
+    rot_err_deg = (t_true.inverse() @ t_got).angle_deg
     reg_px = _registration_difference(true, got)
     rows: list[list[Any]] = [
         ["baseline (mm)", 1000 * true.baseline_m, 1000 * got.baseline_m],

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .compensation import CompensationModel, PaperModel, apply_to_table
+from .compensation import CompensationModel, PaperModel, apply_to_table, by_vox
 from .sweep import SweepTable
 
 if TYPE_CHECKING:
@@ -64,25 +64,6 @@ def plot_registration_error(rows: list[RegistrationError], path: str | Path) -> 
     return _save(fig, path)
 
 
-def _vox_bins(
-    table: SweepTable, values: np.ndarray, step_c: float = 1.0
-) -> dict[tuple[float, float], tuple[np.ndarray, np.ndarray]]:
-    """Mean of ``values`` per (reference, distance) and VOx bin: x and y arrays."""
-    out = {}
-    vox_bin = np.round(table["vox_temp_c"] / step_c) * step_c
-    for r in np.unique(table["reference_temp_c"]):
-        for d in np.unique(table["distance_m"][table["reference_temp_c"] == r]):
-            sel = (
-                (table["reference_temp_c"] == r) & (table["distance_m"] == d) & np.isfinite(values)
-            )
-            bins = np.unique(vox_bin[sel])
-            out[(float(r), float(d))] = (
-                bins,
-                np.array([values[sel][vox_bin[sel] == b].mean() for b in bins]),
-            )
-    return out
-
-
 def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | Path) -> list[Path]:
     """The paper's Fig. 13 (uncompensated readings vs VOx temperature per distance, with the
     model's curves) and Fig. 14 (compensated readings), one panel per target temperature.
@@ -96,12 +77,12 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
         ("fig14_compensated.png", compensated, f"compensated, {model.method} (Fig. 14)"),
     ):
         fig, axes = plt.subplots(1, refs.size, figsize=(5.2 * refs.size, 4.0), squeeze=False)
-        bins = _vox_bins(table, values)
+        bins = by_vox(values, table)  # means per 1 C of VOx
         for ax, r in zip(axes[0], refs, strict=True):
             dists = sorted(d for (rr, d) in bins if rr == r)
             colors = plt.cm.viridis(np.linspace(0, 0.9, len(dists)))
             for d, color in zip(dists, colors, strict=True):
-                x, y = bins[(float(r), d)]
+                x, y = np.array(list(bins[(float(r), d)].items())).T
                 ax.plot(x, y, "o", ms=3, color=color, label=f"{d:g} m")
                 if name.startswith("fig13"):
                     xs = np.linspace(x.min(), x.max(), 100)

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration import _camera_dict as camera_dict
+from ..calibration import camera_dict
 from ..camera import Intrinsics
 from ..errors import InputError, ThermodepthError
 from ..frames import DepthFrame
