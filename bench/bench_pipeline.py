@@ -17,7 +17,7 @@ from thermodepth.measure import find_hotspots
 from thermodepth.pipeline import HotspotSettings, Pipeline, Settings
 from thermodepth.sim import Rig, camera_pose, plate_scene
 
-from .common import measure, report
+from .common import counting, measure, report
 
 
 def main() -> None:
@@ -35,7 +35,6 @@ def main() -> None:
     temp, flags = pipe.temperatures(pair.thermal, vox, near.range_m)
     cal = pipe.calibration
     out = np.empty(pair.depth.shape, np.float32)
-    it = iter(range(10**9))
     timings = [
         measure(
             "1. depth -> thermal (z-buffer, ranges)",
@@ -61,7 +60,7 @@ def main() -> None:
         ),
         measure(
             "whole fused frame (Pipeline.process)",
-            lambda: pipe.process(pairs[next(it) % len(pairs)]),
+            counting(lambda i: pipe.process(pairs[i % len(pairs)])),
             n=200,
         ),
         measure(

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from thermodepth.io.recording import Recorder, RecordingWriter, compressors, sto
 from thermodepth.sim import Rig, camera_pose, plate_scene
 from thermodepth.sources.pairing import StreamPairer
 
-from .common import console, measure, report
+from .common import console, counting, measure, report
 
 LIVE_S = 10.0
 RUNS = 3
@@ -42,36 +41,33 @@ def live_run(out: Path, depth: list[np.ndarray], thermal: list) -> dict[str, flo
     pairer = StreamPairer()
     offered = {"depth": 0, "thermal": 0}
 
-    def produce() -> None:
-        t0 = time.perf_counter()
-        i = k = 0
-        while True:
-            t_d, t_t = i / DEPTH_FPS, k / THERMAL_FPS
-            t_next = min(t_d, t_t)
-            if t_next >= LIVE_S:
-                return
-            delay = t0 + t_next - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
-            if t_d <= t_t:
-                ev = DepthFrame(depth[i % len(depth)], t_d, i)
-                recorder.add(ev)
-                offered["depth"] += 1
-                for m in pairer.add_depth(ev):
-                    recorder.add(m)
-                i += 1
-            else:
-                counts, tel = thermal[k % len(thermal)]
-                th = ThermalFrame(counts, t_t, k, tel)  # type: ignore[arg-type]
-                recorder.add(th)
-                offered["thermal"] += 1
-                for m in pairer.add_thermal(th):
-                    recorder.add(m)
-                k += 1
+    # the cameras' frame times, in real time, from this thread (the recorder has its own)
+    t0 = time.perf_counter()
+    i = k = 0
+    while True:
+        t_d, t_t = i / DEPTH_FPS, k / THERMAL_FPS
+        t_next = min(t_d, t_t)
+        if t_next >= LIVE_S:
+            break
+        delay = t0 + t_next - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        if t_d <= t_t:
+            ev = DepthFrame(depth[i % len(depth)], t_d, i)
+            recorder.add(ev)
+            offered["depth"] += 1
+            for m in pairer.add_depth(ev):
+                recorder.add(m)
+            i += 1
+        else:
+            counts, tel = thermal[k % len(thermal)]
+            th = ThermalFrame(counts, t_t, k, tel)  # type: ignore[arg-type]
+            recorder.add(th)
+            offered["thermal"] += 1
+            for m in pairer.add_thermal(th):
+                recorder.add(m)
+            k += 1
 
-    producer = threading.Thread(target=produce)
-    producer.start()
-    producer.join()
     for m in pairer.flush():
         recorder.add(m)
     stats = recorder.close()
@@ -105,14 +101,11 @@ def main() -> None:
         cap = [capacity(tmp / f"cap{r}.zarr", depth) for r in range(RUNS)]
 
         w = RecordingWriter(tmp / "per-frame.zarr")
-        counter = iter(range(10**9))
 
-        def write_depth() -> None:
-            i = next(counter)
+        def write_depth(i: int) -> None:
             w.add_depth(DepthFrame(depth[i % len(depth)], i / 30, i))
 
-        def write_thermal() -> None:
-            i = next(counter)
+        def write_thermal(i: int) -> None:
             counts, tel = thermal[i % len(thermal)]
             w.add_thermal(ThermalFrame(counts, i / 8.7, i, tel))  # type: ignore[arg-type]
 
@@ -121,8 +114,10 @@ def main() -> None:
 
         nc = Blosc(cname="zstd", clevel=blosc.clevel, shuffle=Blosc.SHUFFLE)
         timings = [
-            measure("write one depth frame (zstd-1 + CRC, commit row)", write_depth, n=40),
-            measure("write one thermal frame + telemetry", write_thermal, n=40),
+            measure(
+                "write one depth frame (zstd-1 + CRC, commit row)", counting(write_depth), n=40
+            ),
+            measure("write one thermal frame + telemetry", counting(write_thermal), n=40),
             measure("Blosc zstd-1 compress one depth frame (peer)", lambda: nc.encode(depth[0])),
         ]
         w.close()

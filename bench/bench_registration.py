@@ -17,13 +17,13 @@ Two timings of the same contenders, on this machine (2 cores shared by several p
   among several).
 - back to back: bench.common.measure, n calls of one contender in a row.
 
-The 2-thread numba rows are at the mercy of the others' load in both: numba's OpenMP layer
-spin-waits between parallel regions, so when another process holds one core, the spinning
-worker and our main thread take turns on the other and a call takes several times its
-1-thread time (thermal_to_depth measured 16-24 ms against 5.5 ms with OMP_WAIT_POLICY=PASSIVE
-or NUMBA_THREADING_LAYER=workqueue, run e.g. ``OMP_WAIT_POLICY=PASSIVE make bench``). The
-1-thread rows (numba.set_num_threads(1)) are stable from run to run and compare the same work
-per core: rs.align, registerDepth and numpy run on one thread.
+The 2-thread numba rows feel the machine's other load in both. OpenMP threads that spin-wait
+between parallel regions made a call several times its 1-thread time when another process
+held a core (thermal_to_depth 16-24 ms against 5.5 ms), so thermodepth sets
+OMP_WAIT_POLICY=PASSIVE unless the environment sets it (``OMP_WAIT_POLICY=ACTIVE make bench``
+shows the spinning layer: ~10 % faster on a quiet machine). The 1-thread rows
+(numba.set_num_threads(1)) are stable from run to run and compare the same work per core:
+rs.align, registerDepth and numpy run on one thread.
 
 Also reported: the agreement between the contenders (bench/peers.py says what each computes)
 and numba's compile time (first call in a fresh process, cache empty vs cached).
@@ -50,7 +50,7 @@ from thermodepth.camera import RigidTransform
 from thermodepth.registration import Reason, Registration
 from thermodepth.sim import Rig, default_calibration, occlusion_scene
 
-from .common import Timing, measure, report
+from .common import Timing, counting, measure, report
 from .peers import (
     RsAlign,
     border_exclusions,
@@ -111,14 +111,8 @@ def back_to_back(contenders: dict[str, Callable[[int], object]]) -> list[Timing]
     timings = []
     for name, fn in contenders.items():
         n, warmup = (8, 1) if name in SLOW else (30, 3)
-        timings.append(measure(name, _counting(fn), n, warmup))
+        timings.append(measure(name, counting(fn), n, warmup))
     return timings
-
-
-def _counting(fn: Callable[[int], object]) -> Callable[[], object]:
-    """``fn`` called with 0, 1, 2, ... (the frame to use)."""
-    calls = iter(range(10**9))
-    return lambda: fn(next(calls))
 
 
 def single_threaded(fn: Callable[[int], object]) -> Callable[[int], object]:

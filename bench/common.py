@@ -26,6 +26,12 @@ class Timing:
     n: int
 
 
+def counting(fn: Callable[[int], object]) -> Callable[[], object]:
+    """``fn`` called with 0, 1, 2, ... on successive calls (which frame or row to use)."""
+    calls = iter(range(10**9))
+    return lambda: fn(next(calls))
+
+
 def measure(name: str, fn: Callable[[], object], n: int = 30, warmup: int = 3) -> Timing:
     """Time ``fn`` ``n`` times after ``warmup`` untimed calls (JIT compile, caches)."""
     for _ in range(warmup):

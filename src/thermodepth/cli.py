@@ -174,18 +174,22 @@ def parse_floats(text: str, option: str) -> list[float]:
     return values
 
 
-@contextmanager
-def progress_bar(description: str, total: int | None) -> Iterator[Callable[[int], None]]:
-    """A rich progress bar (``total`` None: no known end); yields ``advance(n)``."""
-    with Progress(
+def _progress() -> Progress:
+    """The commands' rich progress bar, on stderr."""
+    return Progress(
         SpinnerColumn(),
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
         console=err_console,
-        transient=False,
-    ) as bar:
+    )
+
+
+@contextmanager
+def progress_bar(description: str, total: int | None) -> Iterator[Callable[[int], None]]:
+    """A rich progress bar (``total`` None: no known end); yields ``advance(n)``."""
+    with _progress() as bar:
         task = bar.add_task(description, total=total)
         yield lambda n: bar.advance(task, n)
 
@@ -983,14 +987,7 @@ def demo_cmd(
     from .demo import DemoConfig, run_demo
 
     steps = ["calibration", "compensation sweeps", "paper tables", "inspection", "registration"]
-    with Progress(
-        SpinnerColumn(),
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-    ) as bar:
+    with _progress() as bar:
         task = bar.add_task("demo", total=len(steps))
 
         def step(name: str) -> None:

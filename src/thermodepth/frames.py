@@ -132,5 +132,13 @@ class Match:
     pair: FramePair
 
 
+def match_of(pair: FramePair) -> Match:
+    """A FramePair as a Match whose stream frames are numbered by the pair's index (the
+    inverse of :func:`pair_of`)."""
+    d = DepthFrame(pair.depth, pair.depth_time_s, pair.index, pair.ir)
+    t = ThermalFrame(pair.thermal, pair.thermal_time_s, pair.index, pair.telemetry)
+    return Match(d, t, pair)
+
+
 StreamEvent = DepthFrame | ThermalFrame | Match
 """What a source emits, in order: stream frames as they arrive and pairs as they form."""

@@ -12,7 +12,6 @@ counters).
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -22,7 +21,7 @@ from typing import Any, TypeVar
 from .calibration import Calibration
 from .errors import InputError, ThermodepthError
 from .frames import DepthFrame, FramePair, Match, ThermalFrame
-from .io.measurements import MeasurementWriter
+from .io.measurements import MeasurementWriter, jsonable
 from .io.recording import Recorder, RecorderStats, RecordingWriter, check_output
 from .sources.base import DeviceLostError, Source, event_time_s
 from .sources.pairing import PairingStats
@@ -82,10 +81,6 @@ def stopping(result: SessionResult) -> Iterator[None]:
         raise
 
 
-def _finite(x: float) -> float | None:
-    return x if math.isfinite(x) else None
-
-
 def closing_attrs(result: SessionResult) -> dict[str, Any]:
     """The attributes a recording is closed with: ``stopped`` (and ``error``), ``pairing``
     (pairs, drops, skew in ms) where the source pairs in time, and ``source_counters``."""
@@ -94,14 +89,16 @@ def closing_attrs(result: SessionResult) -> dict[str, Any]:
         attrs["error"] = result.error
     p = result.pairing
     if p is not None:
-        attrs["pairing"] = {
-            "pairs": p.pairs,
-            "dropped": p.dropped,
-            "thermal_frames": p.thermal_frames,
-            "depth_frames": p.depth_frames,
-            "median_abs_skew_ms": _finite(p.median_abs_skew_ms),
-            "max_abs_skew_ms": _finite(p.max_abs_skew_ms),
-        }
+        attrs["pairing"] = jsonable(
+            {
+                "pairs": p.pairs,
+                "dropped": p.dropped,
+                "thermal_frames": p.thermal_frames,
+                "depth_frames": p.depth_frames,
+                "median_abs_skew_ms": p.median_abs_skew_ms,
+                "max_abs_skew_ms": p.max_abs_skew_ms,
+            }
+        )
     return attrs
 
 

@@ -57,6 +57,7 @@ from ..frames import (
     StreamEvent,
     Telemetry,
     ThermalFrame,
+    match_of,
     pair_of,
 )
 
@@ -422,13 +423,6 @@ class RecordingWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def match_of(pair: FramePair) -> Match:
-    """A FramePair as a Match whose stream frames are numbered by the pair's index."""
-    d = DepthFrame(pair.depth, pair.depth_time_s, pair.index, pair.ir)
-    t = ThermalFrame(pair.thermal, pair.thermal_time_s, pair.index, pair.telemetry)
-    return Match(d, t, pair)
 
 
 def _remember(rows: OrderedDict[int, int], index: int, row: int, keep: int = 512) -> None:

@@ -107,7 +107,7 @@ def depth_units(
     if shadow is None or not model.stereo_shadow:
         shadow = np.zeros(z_true_m.shape, dtype=np.bool_)
     out = np.empty(z_true_m.shape, dtype=np.uint16)
-    k_sigma = model.subpixel / (fx * model.baseline_m)  # sigma_z = k_sigma z^2
+    k_sigma = float(depth_sigma_m(1.0, fx, model))  # sigma_z = k_sigma z^2
     _to_units(
         np.ascontiguousarray(z_true_m),
         noise,

@@ -5,8 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
-from ..frames import StreamEvent
-from ..io.recording import match_of
+from ..frames import StreamEvent, match_of
 from ..sim import Rig, camera_pose, plate_scene
 from .base import Source
 
