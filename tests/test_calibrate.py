@@ -4,6 +4,7 @@ with a known truth, every kind of bad input, the naming rules, image formats and
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -37,11 +38,14 @@ from thermodepth.cli import app
 from thermodepth.errors import InputError
 from thermodepth.sim.protocols import simulate_targets
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "opencv-stereo-chessboard"
+SHARED_DATA = Path(
+    os.environ.get("THERMODEPTH_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared/data")
+)
+REAL = SHARED_DATA / "opencv-stereo-chessboard"
 needs_real = pytest.mark.skipif(
     not REAL.is_dir(),
     reason=f"{REAL} is absent: OpenCV's stereo chessboard samples live in ../shared/data "
-    "next to the clone",
+    "next to the clone (or set THERMODEPTH_SHARED_DATA)",
 )
 BOARD_REAL = BoardSpec.parse("checkerboard:9x6", 1.0)  # square size unknown: results in squares
 BOARD_SIM = BoardSpec.parse("checkerboard:9x6", 0.03)
