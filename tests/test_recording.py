@@ -283,6 +283,18 @@ def test_keyboard_interrupt_closes_the_recording(tmp_path: Path) -> None:
     assert rec.complete and rec.n_pairs == 3
 
 
+def test_a_source_that_fails_to_close_still_leaves_a_closed_recording(tmp_path: Path) -> None:
+    class StuckOnClose(SimSource):  # e.g. a second Ctrl-C while the cameras' threads stop
+        def close(self) -> None:
+            super().close()
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        record_session(StuckOnClose(sim_rig()), tmp_path / "c.zarr", frames=3)
+    rec = Recording(tmp_path / "c.zarr")
+    assert rec.complete and rec.n_pairs == 3 and rec.attrs["stopped"] == "frames"
+
+
 def test_duration_uses_source_time(tmp_path: Path) -> None:
     result = record_session(SimSource(sim_rig()), tmp_path / "d.zarr", duration_s=1.0)
     assert result.stopped == "duration"

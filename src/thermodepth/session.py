@@ -156,10 +156,12 @@ def _session(source: Source, result: SessionResult, open_outputs: Callable[[], R
         with stopping(result):
             yield recorder
     finally:
-        source.close()
-        result.counters = source.counters()
-        if recorder is not None:
-            recorder.close(closing_attrs(result))
+        try:
+            source.close()
+            result.counters = source.counters()
+        finally:  # a source that fails to close (a second Ctrl-C) still leaves a closed recording
+            if recorder is not None:
+                recorder.close(closing_attrs(result))
 
 
 def tee(source: Source, recorder: Recorder) -> Iterator[FramePair]:
