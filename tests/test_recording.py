@@ -126,6 +126,21 @@ def test_raw_streams_and_pairs_as_references(tmp_path: Path) -> None:
     assert rec.depth_frame(9).time_s == 9 / 30
 
 
+def test_a_recording_of_one_camera_replays_its_frames(tmp_path: Path) -> None:
+    depth = [DepthFrame(np.full((3, 4), i, np.uint16), i / 30, i) for i in range(5)]
+    with RecordingWriter(tmp_path / "d.zarr") as w:
+        for d in depth:
+            w.add(d)
+    src = open_source(f"recording:{tmp_path / 'd.zarr'}")
+    assert src.streams == {"depth"}
+    result = record_session(src, tmp_path / "again.zarr")
+    again = Recording(tmp_path / "again.zarr")
+    assert result.stopped == "end" and (again.n_depth, again.n_thermal, again.n_pairs) == (5, 0, 0)
+    for i, d in enumerate(depth):
+        got = again.depth_frame(i)
+        assert np.array_equal(got.depth, d.depth) and (got.time_s, got.index) == (d.time_s, i)
+
+
 def test_corrupt_chunk_skips_that_frame_with_one_warning(tmp_path: Path) -> None:
     out = tmp_path / "c.zarr"
     record_session(SimSource(sim_rig()), out, frames=5)

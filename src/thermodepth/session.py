@@ -227,7 +227,6 @@ def run_session(
     record: str | Path | None = None,
     out_dir: str | Path | None = None,
     on_frame: Callable[[Any], None] | None = None,
-    overwrite: bool = False,
     record_settings: dict[str, Any] | None = None,
 ) -> RunResult:
     """Fuse every pair of ``source`` through ``pipeline`` (a
@@ -253,7 +252,7 @@ def run_session(
                 ) from None
         if record is None:
             return None
-        return open_recorder(source, record, pipeline.calibration, overwrite, record_settings)
+        return open_recorder(source, record, pipeline.calibration, settings=record_settings)
 
     try:
         with _session(source, result, open_outputs) as recorder:

@@ -28,6 +28,7 @@ Compression: Blosc with zstd (level 1, byte shuffle) then a CRC-32C checksum cod
 
 from __future__ import annotations
 
+import heapq
 import json
 import os
 import queue
@@ -36,7 +37,7 @@ import time
 import warnings
 import zlib
 from collections import OrderedDict
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -438,7 +439,8 @@ _STOP = object()
 
 @dataclass
 class RecorderStats:
-    """What a :class:`Recorder` wrote and dropped, and how fast it wrote."""
+    """What a :class:`Recorder` wrote and dropped, and how fast it wrote (the written counts
+    and ``wall_s`` are filled in on close; ``dropped`` and ``busy_s`` as it goes)."""
 
     depth_frames: int = 0
     thermal_frames: int = 0
@@ -524,10 +526,6 @@ class Recorder:
             except BaseException as exc:  # reported to the producer
                 self._error = exc
             self.stats.busy_s += time.perf_counter() - t0
-            self.stats.depth_frames = w.depth.rows
-            self.stats.thermal_frames = w.thermal.rows
-            self.stats.pairs = w.n_pairs
-            self.stats.bytes_written = w.bytes_written
 
     def close(self, extra_attrs: dict[str, Any] | None = None) -> RecorderStats:
         """Finish writing what is queued, mark the recording complete, return the stats."""
@@ -535,7 +533,10 @@ class Recorder:
             self.closed = True
             self._queue.put(_STOP)
             self._thread.join()
+            w = self.writer
             self.stats.wall_s = time.perf_counter() - self._t0
+            self.stats.depth_frames, self.stats.thermal_frames = w.depth.rows, w.thermal.rows
+            self.stats.pairs, self.stats.bytes_written = w.n_pairs, w.bytes_written
             if self._error is not None:
                 raise self._error
             self.writer.close({"recorder": {"dropped": self.stats.dropped}, **(extra_attrs or {})})
@@ -665,7 +666,7 @@ class Recording:
             self.root = zarr.open_group(str(self.path), mode="r", zarr_format=3)
             attrs = dict(self.root.attrs)
         except Exception as exc:
-            raise InputError(f"{self.path}: not a readable Zarr v3 store ({_first(exc)})") from None
+            raise InputError(f"{self.path}: not a readable Zarr v3 store ({_short(exc)})") from None
         if attrs.get("format") != FORMAT:
             raise InputError(f"{self.path}: not a thermodepth recording (no format attribute)")
         if attrs.get("version") != VERSION:
@@ -780,37 +781,44 @@ class Recording:
             raise CorruptFrameError(f"thermal frame {row}: pixels do not match their CRC-32")
         return ThermalFrame(counts, float(meta[0]), int(meta[1]), telemetry_from_row(meta[3:]))
 
-    def matches(self) -> Iterator[Match]:
-        """Every recorded pair with its frames, in order; unreadable ones skipped and
-        counted (one warning line each, or one per table chunk warned about on open)."""
-        for i, (d_row, t_row, index) in enumerate(self._pairs.rows.tolist()):
+    def _readable(self, rows: Iterable[Any], what: str, read: Callable[..., Any]) -> Iterator[Any]:
+        """``read(*row)`` for each row; unreadable ones skipped and counted (one warning line
+        each, or one per table chunk warned about on open)."""
+        for i, row in enumerate(rows):
             try:
-                self._pairs.check(i, "pair row")
-                d = self.depth_frame(int(d_row))
-                t = self.thermal_frame(int(t_row))
+                yield read(*row)
             except CorruptFrameError as exc:
                 self.skipped += 1
                 if not exc.reported:
-                    self.warn(f"{self.path}: pair {i} skipped: {exc}")
-                continue
-            yield Match(d, t, pair_of(d, t, int(index)))
+                    self.warn(f"{self.path}: {what} {i} skipped: {exc}")
+
+    def matches(self) -> Iterator[Match]:
+        """Every recorded pair with its frames, in order; unreadable ones skipped and
+        counted (one warning line each, or one per table chunk warned about on open)."""
+
+        def read(i: int, d_row: int, t_row: int, index: int) -> Match:
+            self._pairs.check(i, "pair row")
+            d = self.depth_frame(int(d_row))
+            t = self.thermal_frame(int(t_row))
+            return Match(d, t, pair_of(d, t, int(index)))
+
+        rows = ((i, *row) for i, row in enumerate(self._pairs.rows.tolist()))
+        yield from self._readable(rows, "pair", read)
+
+    def frames(self) -> Iterator[DepthFrame | ThermalFrame]:
+        """Every recorded depth and thermal frame, in time order (what a recording of one
+        camera holds: it has no pairs); unreadable ones skipped and counted as in
+        :meth:`matches`."""
+        depth = self._readable(((r,) for r in range(self.n_depth)), "depth frame", self.depth_frame)
+        thermal = self._readable(
+            ((r,) for r in range(self.n_thermal)), "thermal frame", self.thermal_frame
+        )
+        yield from heapq.merge(depth, thermal, key=lambda f: f.time_s)
 
     def pairs(self) -> Iterator[FramePair]:
         """The recorded FramePairs, bit for bit (see :meth:`matches`)."""
         for m in self.matches():
             yield m.pair
-
-    def summary(self) -> str:
-        state = "complete" if self.complete else "not closed (recorder stopped abruptly)"
-        return (
-            f"{self.path}: {self.n_pairs} pairs, {self.n_depth} depth and {self.n_thermal} "
-            f"thermal frames, {state}"
-        )
-
-
-def _first(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
 
 
 def _short(exc: BaseException) -> str:

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from ..calibration import Calibration
 from ..frames import StreamEvent
-from ..io.recording import Recording, RecordingWarning
+from ..io.recording import Recording
 from .base import Source, with_device_depth
 
 
@@ -32,7 +31,6 @@ class RecordingSource(Source):
         warn: Callable[[str], None] | None = None,
         calibration: Calibration | None = None,
     ) -> None:
-        warn = warn or (lambda msg: warnings.warn(msg, RecordingWarning, stacklevel=2))
         self.recording = Recording(path, warn)
         self.name = f"recording:{path}"
         self.files = (Path(path),)
@@ -50,7 +48,7 @@ class RecordingSource(Source):
         self.streams = frozenset(streams) if self.recording.n_pairs == 0 else self.streams
         dropped = self.recording.dropped
         if sum(dropped.values()):
-            warn(
+            self.recording.warn(
                 f"{path}: the recorder dropped {sum(dropped.values())} events while recording ("
                 + ", ".join(f"{k} {v}" for k, v in dropped.items())
                 + "): the replay gives the pairs recorded, not every pair the live run saw"
@@ -64,7 +62,10 @@ class RecordingSource(Source):
         return {"replay_skipped": self.recording.skipped}
 
     def events(self) -> Iterator[StreamEvent]:
-        yield from self.recording.matches()
+        if self.recording.n_pairs:
+            yield from self.recording.matches()
+        else:  # a recording of one camera: its frames
+            yield from self.recording.frames()
 
     def settings(self) -> dict[str, Any]:
         return {"source": self.name, "recorded_settings": self.recording.settings}
