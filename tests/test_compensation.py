@@ -111,6 +111,21 @@ def test_paper_fit_recovers_known_lines() -> None:
     assert model.vox_range_c == (25.0, 40.0)
 
 
+def test_paper_fit_takes_the_tables_own_39_c() -> None:
+    # a plate logged at 39.0001 C is the paper's 39 C target: its rows are the ones fitted
+    x = np.arange(25.0, 41.0)
+    table = _table(np.ones(16), x, 5.6 * np.log(x) + 19.1, ref=39.0001)
+    model = PaperModel.fit(table)
+    assert model.reference_temp_c == 39.0001
+    np.testing.assert_allclose((model.a[0], model.b[0]), (5.6, 19.1), atol=1e-9)
+
+
+def test_scores_of_no_finite_reading_are_nan() -> None:
+    table = _table(np.ones(3), np.array([25.0, 30, 35]), np.full(3, 39.0))
+    got = overall(np.full(3, np.nan), table)
+    assert got["n"] == 0 and all(np.isnan(got[k]) for k in ("rmse_c", "max_abs_error_c"))
+
+
 def test_paper_fit_refuses_too_few_vox_and_non_positive_x() -> None:
     x = np.array([25.0, 25.0, 30.0, 30.0])
     with pytest.raises(InputError, match="distance 1 m has 2 distinct VOx temperatures"):

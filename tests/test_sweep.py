@@ -73,3 +73,23 @@ def test_arbitrary_text_gives_a_table_or_one_clear_line(text: str) -> None:
         assert message.startswith(str(path)) and "\n" not in message
     else:
         assert len(table) > 0 and all(np.isfinite(table[c]).all() for c in REQUIRED)
+
+
+def test_replacing_a_column_keeps_one_of_it() -> None:
+    table = SweepTable({name: np.arange(3.0) for name in REQUIRED})
+    once = table.with_columns(flag=np.zeros(3), note=["a", "b", "c"])
+    twice = once.with_columns(flag=np.ones(3), note=["x", "y", "z"])
+    assert twice.names == [*REQUIRED, "flag", "note"]
+    path = _tmp("")
+    write_sweep_csv(path, twice)
+    assert path.read_text().splitlines()[0] == ",".join([*REQUIRED, "flag", "note"])
+
+
+def test_a_repeated_header_name_is_one_line() -> None:
+    path = _tmp(",".join([*REQUIRED, "distance_m"]) + "\n1,25,38,39,2\n")
+    try:
+        read_sweep_csv(path)
+    except InputError as exc:
+        assert str(exc) == f"{path}: header names distance_m more than once"
+    else:
+        raise AssertionError("a repeated column was accepted")

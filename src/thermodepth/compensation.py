@@ -44,7 +44,7 @@ from .radiometry import (
     celsius_to_raw,
     raw_to_celsius,
 )
-from .sweep import SweepTable
+from .sweep import REQUIRED, SweepTable
 
 FloatArray = NDArray[np.float64]
 SCHEMA = "thermodepth.compensation"
@@ -610,7 +610,7 @@ def apply_to_table(model: CompensationModel, table: SweepTable) -> Compensated:
 def _check_sweep(table: SweepTable) -> None:
     if len(table) == 0:
         raise InputError(f"{table.source}: no rows to fit")
-    for name in ("distance_m", "vox_temp_c", "measured_temp_c", "reference_temp_c"):
+    for name in REQUIRED:
         if name not in table:
             raise InputError(f"{table.source}: missing column {name}")
     if np.any(table["distance_m"] < 0):
@@ -626,16 +626,14 @@ def _line_of(table: SweepTable, i: int) -> str:
 
 def _pick_reference(table: SweepTable, wanted: float | None) -> float:
     refs, counts = np.unique(table["reference_temp_c"], return_counts=True)
-    if wanted is not None:
-        if not np.any(np.isclose(refs, wanted)):
-            raise InputError(
-                f"{table.source}: no rows at reference_temp_c = {wanted:g} C "
-                f"(found: {', '.join(f'{r:g}' for r in refs)})"
-            )
-        return float(refs[np.isclose(refs, wanted)][0])
-    if np.any(np.isclose(refs, 39.0)):
-        return 39.0
-    return float(refs[np.argmax(counts)])
+    if wanted is None:  # the paper's 39 C, else the most frequent
+        wanted = 39.0 if np.any(np.isclose(refs, 39.0)) else float(refs[np.argmax(counts)])
+    if not np.any(np.isclose(refs, wanted)):
+        raise InputError(
+            f"{table.source}: no rows at reference_temp_c = {wanted:g} C "
+            f"(found: {', '.join(f'{r:g}' for r in refs)})"
+        )
+    return float(refs[np.isclose(refs, wanted)][0])  # the table's own value
 
 
 class _Strict(BaseModel):
@@ -769,6 +767,9 @@ def overall(compensated_c: FloatArray, table: SweepTable) -> dict[str, float]:
     """RMSE, max |error| and mean error (C) over every finite row."""
     e = compensated_c - table["reference_temp_c"]
     e = e[np.isfinite(e)]
+    if e.size == 0:
+        nan = float("nan")
+        return {"n": 0, "rmse_c": nan, "max_abs_error_c": nan, "mean_error_c": nan}
     return {
         "n": int(e.size),
         "rmse_c": float(np.sqrt(np.mean(e**2))),

@@ -101,7 +101,8 @@ class SweepTable:
             else:
                 txt[k] = [str(x) for x in v]
                 num.pop(k, None)
-        return SweepTable(num, txt, self.source, self.lines, self.names + list(cols))
+        added = [k for k in cols if k not in self.names]  # a replaced column keeps its place
+        return SweepTable(num, txt, self.source, self.lines, self.names + added)
 
 
 def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> SweepTable:
@@ -121,6 +122,9 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     if header is None or not any(h.strip() for h in header):
         raise InputError(f"{p}: empty file (expected a header with {', '.join(required)})")
     header = [h.strip() for h in header]
+    repeated = sorted({h for h in header if header.count(h) > 1})
+    if repeated:
+        raise InputError(f"{p}: header names {', '.join(repeated)} more than once")
     missing = [c for c in required if c not in header]
     if missing:
         raise InputError(

@@ -33,9 +33,11 @@ def write_ply(
     t = np.asarray(temp_c, np.float32).ravel()
     if len(pts) != len(t):
         raise ValueError(f"{len(pts)} points but {len(t)} temperatures")
-    lo = float(np.nanpercentile(t, 1)) if vmin_c is None and t.size else (vmin_c or 0.0)
-    hi = float(np.nanpercentile(t, 99)) if vmax_c is None and t.size else (vmax_c or 1.0)
-    scaled = np.clip((t - lo) / max(hi - lo, 1e-6), 0, 1)
+    if vmin_c is None:
+        vmin_c = float(np.nanpercentile(t, 1)) if t.size else 0.0
+    if vmax_c is None:
+        vmax_c = float(np.nanpercentile(t, 99)) if t.size else 1.0
+    scaled = np.clip((t - vmin_c) / max(vmax_c - vmin_c, 1e-6), 0, 1)
     rgb = (colormaps[colormap](np.nan_to_num(scaled))[:, :3] * 255).round().astype(np.uint8)
     vertex = np.empty(
         len(pts),
