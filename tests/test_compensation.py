@@ -266,6 +266,16 @@ def test_bad_model_files(tmp_path: Path, edit, message: str) -> None:  # type: i
     assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
 
 
+def test_radiance_model_file_with_impossible_constants(tmp_path: Path, generalisation) -> None:  # type: ignore[no-untyped-def]
+    path = tmp_path / "m.json"
+    save_model(generalisation.models["radiance"], path)
+    doc = json.loads(path.read_text())
+    doc["model"]["planck"]["R"] = -5.0
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=r"model\.planck\.R: Input should be greater than 0"):
+        load_model(path)
+
+
 def test_model_file_not_json(tmp_path: Path) -> None:
     path = tmp_path / "m.json"
     path.write_text("{not json")

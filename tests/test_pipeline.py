@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from thermodepth.calibration import PlanckSchema
 from thermodepth.cli import app
 from thermodepth.compensation import Flag, PaperModel, save_model
 from thermodepth.errors import InputError
@@ -24,7 +25,6 @@ from thermodepth.pipeline import (
     HotspotSettings,
     Pipeline,
     PixelFlag,
-    PlanckSettings,
     RadiometrySettings,
     RoiSettings,
     Settings,
@@ -142,7 +142,7 @@ def test_radiance_model_refuses_other_radiometry(model_path: Path) -> None:
     cal = inspection_rig(1.0).calibration
     for radiometry in (
         RadiometrySettings(method="thermimage"),
-        RadiometrySettings(planck=PlanckSettings(R=1e5, B=1400, F=1, O=6000)),
+        RadiometrySettings(planck=PlanckSchema(R=1e5, B=1400, F=1, O=6000)),
     ):
         with pytest.raises(InputError, match="carries its own radiometry"):
             Pipeline(Settings(compensation=model_path, radiometry=radiometry), cal)

@@ -30,17 +30,33 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from .camera import Intrinsics, RigidTransform, is_rotation
 from .errors import InputError
+from .radiometry import PlanckConstants
 
 SCHEMA_VERSION = 1
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
-class _Strict(BaseModel):
+class StrictSchema(BaseModel):
+    """Base of every file and settings schema: unknown keys, NaN and infinities refused."""
+
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
-class CameraSchema(_Strict):
+class PlanckSchema(StrictSchema):
+    """A camera's counts calibration S = O + R / (exp(B / T) - F) as written in files
+    (:class:`~thermodepth.radiometry.PlanckConstants`)."""
+
+    R: float = Field(gt=0)
+    B: float = Field(gt=0)
+    F: float
+    O: float  # noqa: E741 (the paper's and FLIR's name)
+
+    def constants(self) -> PlanckConstants:
+        return PlanckConstants(**self.model_dump())
+
+
+class CameraSchema(StrictSchema):
     width: int = Field(gt=0)
     height: int = Field(gt=0)
     fx: Finite = Field(gt=0)
@@ -63,7 +79,7 @@ class DepthCameraSchema(CameraSchema):
     depth_scale_m: Finite = Field(gt=0)
 
 
-class TransformSchema(_Strict):
+class TransformSchema(StrictSchema):
     rotation: list[list[Finite]] = Field(min_length=3, max_length=3)
     translation_m: list[Finite] = Field(min_length=3, max_length=3)
 
@@ -81,7 +97,7 @@ class TransformSchema(_Strict):
         return self
 
 
-class CalibrationSchema(_Strict):
+class CalibrationSchema(StrictSchema):
     depth: DepthCameraSchema
     thermal: CameraSchema
     thermal_from_depth: TransformSchema

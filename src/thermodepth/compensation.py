@@ -32,9 +32,9 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import Field, ValidationError
 
-from .calibration import describe_validation_error
+from .calibration import PlanckSchema, StrictSchema, describe_validation_error
 from .errors import InputError
 from .radiometry import (
     PAPER_2022,
@@ -433,7 +433,7 @@ class RadianceModel:
     def from_dict(cls, data: dict[str, Any]) -> RadianceModel:
         p = _RadianceSchema.model_validate(data)
         return cls(
-            PlanckConstants(**p.planck.model_dump()),
+            p.planck.constants(),
             tuple(p.gain),
             tuple(p.offset),
             p.vox_centre_c,
@@ -636,11 +636,7 @@ def _pick_reference(table: SweepTable, wanted: float | None) -> float:
     return float(refs[np.isclose(refs, wanted)][0])  # the table's own value
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-
-
-class _PaperSchema(_Strict):
+class _PaperSchema(StrictSchema):
     distances_m: list[float] = Field(min_length=1)
     a: list[float]
     b: list[float]
@@ -649,21 +645,14 @@ class _PaperSchema(_Strict):
     note: str = ""
 
 
-class _PlanckSchema(_Strict):
-    R: float
-    B: float
-    F: float
-    O: float  # noqa: E741 (the paper's and FLIR's name)
-
-
-class _ConditionsSchema(_Strict):
+class _ConditionsSchema(StrictSchema):
     ambient_temp_c: float
     humidity_pct: float = Field(ge=0, le=100)
     emissivity: float = Field(gt=0, le=1)
 
 
-class _RadianceSchema(_Strict):
-    planck: _PlanckSchema
+class _RadianceSchema(StrictSchema):
+    planck: PlanckSchema
     gain: list[float] = Field(min_length=1)
     offset: list[float] = Field(min_length=1)
     vox_centre_c: float

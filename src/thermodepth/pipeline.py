@@ -27,9 +27,15 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import AfterValidator, Field, ValidationError, model_validator
 
-from .calibration import Calibration, describe_validation_error, read_mapping
+from .calibration import (
+    Calibration,
+    PlanckSchema,
+    StrictSchema,
+    describe_validation_error,
+    read_mapping,
+)
 from .compensation import Flag, PaperModel, RadianceModel, load_model
 from .errors import InputError
 from .frames import FramePair
@@ -79,17 +85,6 @@ class PixelFlag(IntFlag):
 # ---------------------------------------------------------------------------------------------
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
-
-
-class PlanckSettings(_Strict):
-    R: float = Field(gt=0)
-    B: float = Field(gt=0)
-    F: float
-    O: float  # noqa: E741 (the paper's and FLIR's name)
-
-
 def _one_of(choices: Collection[str]) -> AfterValidator:
     """A pydantic check that a name is one of a ``method=`` registry's keys."""
 
@@ -101,14 +96,14 @@ def _one_of(choices: Collection[str]) -> AfterValidator:
     return AfterValidator(check)
 
 
-class RadiometrySettings(_Strict):
+class RadiometrySettings(StrictSchema):
     emissivity: float = Field(default=0.95, gt=0, le=1)
     ambient_temp_c: float = 25.0
     reflected_temp_c: float | None = None
     humidity_pct: float = Field(default=50.0, ge=0, le=100)
     method: Annotated[str, _one_of(RADIOMETRY_METHODS)] = "flir"
     # None: a radiance compensation model's own constants, else paper2022
-    planck: Annotated[str, _one_of(PLANCK_PRESETS)] | PlanckSettings | None = None
+    planck: Annotated[str, _one_of(PLANCK_PRESETS)] | PlanckSchema | None = None
 
     def constants(self, default: PlanckConstants = PAPER_2022) -> PlanckConstants:
         """The Planck constants the settings name, or ``default`` when they name none."""
@@ -116,20 +111,20 @@ class RadiometrySettings(_Strict):
             return default
         if isinstance(self.planck, str):
             return PLANCK_PRESETS[self.planck]
-        return PlanckConstants(**self.planck.model_dump())
+        return self.planck.constants()
 
 
-class RegistrationSettings(_Strict):
+class RegistrationSettings(StrictSchema):
     method: Annotated[str, _one_of(REGISTRATION_METHODS)] = "reproject"
     interpolation: Literal["nearest", "bilinear"] = "nearest"
 
 
-class HotspotSettings(_Strict):
+class HotspotSettings(StrictSchema):
     threshold_c: float = 50.0
     min_thermal_px: int = Field(default=1, ge=1)
 
 
-class RoiSettings(_Strict):
+class RoiSettings(StrictSchema):
     name: str
     rect: tuple[int, int, int, int] | None = None
     polygon: list[tuple[float, float]] | None = Field(default=None, min_length=3)
@@ -154,14 +149,14 @@ class RoiSettings(_Strict):
         return DepthRangeRoi(self.name, *self.depth_range_m)
 
 
-class AlarmSettings(_Strict):
+class AlarmSettings(StrictSchema):
     name: str
     above_c: float
     for_frames: int = Field(default=1, ge=1)
     what: str = "hotspot"
 
 
-class Settings(_Strict):
+class Settings(StrictSchema):
     """Everything the pipeline needs, from one YAML file (paths relative to it)."""
 
     calibration: Path | None = None
@@ -169,8 +164,8 @@ class Settings(_Strict):
     radiometry: RadiometrySettings = RadiometrySettings()
     registration: RegistrationSettings = RegistrationSettings()
     hotspots: HotspotSettings = HotspotSettings()
-    rois: list[RoiSettings] = []
-    alarms: list[AlarmSettings] = []
+    rois: list[RoiSettings] = Field(default_factory=list)
+    alarms: list[AlarmSettings] = Field(default_factory=list)
     fallback_distance_m: float | None = Field(default=None, gt=0)
 
     @classmethod
