@@ -163,17 +163,21 @@ class PaperModel:
         x = np.asarray(vox_c, np.float64)
         d = np.asarray(distance_m, np.float64)
         ds = np.array(self.distances_m)
-        a_d = np.interp(d, ds, self.a)  # clamps beyond the calibrated distances
-        b_d = np.interp(d, ds, self.b)
         with np.errstate(divide="ignore", invalid="ignore"):
-            ln_x = np.log(x)  # before broadcasting: x is often one value for a whole frame
-        corr = self.reference_temp_c - (a_d * ln_x + b_d)
-        x, d = np.broadcast_arrays(x, d)
-        flag = _range_flag(d, ds[0], ds[-1], 1e-9, Flag.DISTANCE_OUTSIDE)
-        flag |= _range_flag(x, *self.vox_range_c, 0.5, Flag.VOX_OUTSIDE)
+            ln_x = np.log(x)
+            if ln_x.ndim == 0:  # one VOx value for a whole frame: y_d at the nodes, one interp
+                y = np.interp(d, ds, np.multiply(self.a, ln_x) + self.b)
+            else:  # np.interp clamps beyond the calibrated distances
+                y = np.interp(d, ds, self.a) * ln_x + np.interp(d, ds, self.b)
+        corr = self.reference_temp_c - y
+        # each flag at its own shape (one VOx value, a distance map), broadcast once
         bad = ~np.isfinite(corr) | (x <= 0)
-        flag |= np.where(bad, np.uint8(Flag.INVALID), np.uint8(0))
-        return Compensated(np.where(bad, np.nan, corr), flag)
+        flag = (
+            _range_flag(d, ds[0], ds[-1], 1e-9, Flag.DISTANCE_OUTSIDE)
+            | _range_flag(x, *self.vox_range_c, 0.5, Flag.VOX_OUTSIDE)
+            | np.where(bad, np.uint8(Flag.INVALID), np.uint8(0))
+        )
+        return Compensated(np.where(bad, np.nan, corr), np.broadcast_to(flag, corr.shape).copy())
 
     def apply(
         self,
@@ -409,7 +413,7 @@ class RadianceModel:
             {
                 "degrees": {"gain": chosen[0], "offset": chosen[1]},
                 "gain_fixed_to_one": fixed_gain,
-                "folds": data.fold_names(),
+                "folds": list(data.folds()),
                 "rmse_c": {f"{g},{h}": round(s, 5) for (g, h), s in scores.items()},
             },
         )
@@ -512,26 +516,19 @@ class _Design:
             return np.array([1.0] + [0.0] * g_deg), coef
         return coef[: g_deg + 1], coef[g_deg + 1 :]
 
-    def folds(self) -> list[NDArray[np.bool_]]:
-        """Held-out rows per fold: each distance, and each reference temperature when there
-        are several (what the model must generalise over)."""
-        out = [self.distance == d for d in np.unique(self.distance)]
+    def folds(self) -> dict[str, NDArray[np.bool_]]:
+        """Held-out rows per fold, by name: each distance, and each reference temperature
+        when there are several (what the model must generalise over)."""
+        out = {f"distance {d:g} m": self.distance == d for d in np.unique(self.distance)}
         refs = np.unique(self.reference)
         if refs.size > 1:
-            out += [self.reference == r for r in refs]
+            out |= {f"target {r:g} C": self.reference == r for r in refs}
         return out
-
-    def fold_names(self) -> list[str]:
-        names = [f"distance {d:g} m" for d in np.unique(self.distance)]
-        refs = np.unique(self.reference)
-        if refs.size > 1:
-            names += [f"target {r:g} C" for r in refs]
-        return names
 
     def held_out_errors(self, g_deg: int, h_deg: int, fixed_gain: bool) -> FloatArray:
         """Compensated minus true temperature of every row when its fold was held out."""
         errs = []
-        for test in self.folds():
+        for test in self.folds().values():
             train = ~test
             if not train.any():
                 continue

@@ -235,7 +235,7 @@ def find_hotspots(
     thermal: Intrinsics,
     thermal_from_depth: RigidTransform,
     ambient_temp_c: float,
-    emissivity: float | FloatArray = 0.95,
+    emissivity: float = 0.95,
     flags: NDArray[np.uint8] | None = None,
     min_thermal_px: int = 1,
 ) -> list[Hotspot]:
@@ -248,7 +248,6 @@ def find_hotspots(
         hot = (temp_thermal_c >= threshold_c).astype(np.uint8)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(hot, connectivity=8)
     depth_from_thermal = _inverse(thermal_from_depth)
-    eps_map = np.ndim(emissivity) > 0
     ambient_k = celsius_to_kelvin(ambient_temp_c)
     rx, ry = pixel_rays(thermal)
     out = []
@@ -275,9 +274,8 @@ def find_hotspots(
             w = area[good]
             centroid_t = (pts_t[good] * w[:, None]).sum(axis=0) / w.sum()
             centroid = depth_from_thermal.apply(centroid_t)
-            eps = np.asarray(emissivity)[v, u][known][good] if eps_map else float(emissivity)
             surface_k = celsius_to_kelvin(temps[known][good])
-            power = float(np.sum(stefan_boltzmann_power_w(w, eps, surface_k, ambient_k)))
+            power = float(np.sum(stefan_boltzmann_power_w(w, emissivity, surface_k, ambient_k)))
             area_m2 = float(w.sum())
         else:
             centroid = np.full(3, np.nan)

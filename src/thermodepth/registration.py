@@ -554,7 +554,6 @@ class _PaperMaps:
 
     def __init__(self, cal: Calibration, affine: tuple[float, float, float, float]) -> None:
         d, t = cal.depth, cal.thermal
-        self.affine = affine
         a_u, b_u, a_v, b_v = affine
         # depth -> thermal: the raw thermal (u, v) each depth pixel samples (undistorting the
         # thermal image = sampling it at the distorted position)
