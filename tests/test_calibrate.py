@@ -257,6 +257,14 @@ def test_bad_depth_intrinsics_files(tmp_path: Path) -> None:
     bad.write_text("width: 1280\n")
     with pytest.raises(InputError, match=r"depth\.yaml: height: missing"):
         load_depth_intrinsics(bad)
+    camera = (
+        "width: 1280, height: 720, fx: 645, fy: 645, cx: 639.5, cy: 359.5, "
+        "distortion: [0, 0, 0, 0, 0]"
+    )
+    for scale, message in ((".inf", "finite number"), ("-1", "greater than 0")):
+        bad.write_text(f"depth: {{{camera}, depth_scale_m: {scale}}}\n")
+        with pytest.raises(InputError, match=rf"depth\.yaml: depth\.depth_scale_m: .*{message}"):
+            load_depth_intrinsics(bad)
 
 
 @needs_real

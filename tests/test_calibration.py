@@ -158,3 +158,10 @@ def test_malformed_files(tmp_path: Path, name: str, content: str, message: str) 
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="cannot read"):
         Calibration.load(tmp_path / "nope.yaml")
+
+
+def test_depth_unit_must_be_finite_and_positive() -> None:
+    cal = Calibration.from_dict(valid_dict())
+    for bad in (0.0, -0.001, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match="depth_scale_m must be a finite number > 0"):
+            Calibration(cal.depth, cal.thermal, bad, cal.thermal_from_depth)

@@ -43,6 +43,7 @@ from .calibration import (
     BoardSpec,
     Calibration,
     CameraSchema,
+    DepthCameraSchema,
     describe_validation_error,
     intrinsics_of,
     read_mapping,
@@ -868,17 +869,14 @@ def load_depth_intrinsics(path: str | Path) -> tuple[Intrinsics, float | None]:
     """
     data = read_mapping(path)
     nested = isinstance(data.get("depth"), dict)
-    section = dict(data["depth"] if nested else data)
-    scale = section.pop("depth_scale_m", None)
+    section = data["depth"] if nested else data
+    schema = DepthCameraSchema if "depth_scale_m" in section else CameraSchema
     try:
-        cam = CameraSchema.model_validate(section)
+        cam = schema.model_validate(section)
     except ValidationError as exc:
         where = "depth." if nested else ""
         raise InputError(f"{path}: {where}{describe_validation_error(exc)}") from None
-    if scale is not None and not (isinstance(scale, int | float) and scale > 0):
-        where = "depth." if nested else ""
-        raise InputError(f"{path}: {where}depth_scale_m: must be a number > 0 (got {scale!r})")
-    return intrinsics_of(cam), None if scale is None else float(scale)
+    return intrinsics_of(cam), getattr(cam, "depth_scale_m", None)
 
 
 def _image_size(img: NDArray[Any]) -> tuple[int, int]:

@@ -18,6 +18,7 @@ the field, e.g. ``calib.yaml: thermal.fx: must be > 0 (got -150.0)``.
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -137,6 +138,8 @@ class Calibration:
         t = self.thermal_from_depth
         if (t.to_frame, t.from_frame) != ("thermal", "depth"):
             raise ValueError(f"expected a thermal_from_depth transform, got {t.name}")
+        if not (math.isfinite(self.depth_scale_m) and self.depth_scale_m > 0):
+            raise ValueError(f"depth_scale_m must be a finite number > 0, got {self.depth_scale_m}")
 
     @classmethod
     def from_dict(cls, data: Any, source: str = "<calibration>") -> Calibration:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -879,8 +880,8 @@ def calibrate_cmd(
     if depth_intrinsics is not None:
         fixed, scale = load_depth_intrinsics(depth_intrinsics)
     if depth_scale_m is not None:
-        if not depth_scale_m > 0:
-            raise InputError(f"--depth-scale-m: must be > 0, got {depth_scale_m}")
+        if not (math.isfinite(depth_scale_m) and depth_scale_m > 0):
+            raise InputError(f"--depth-scale-m: must be a finite number > 0, got {depth_scale_m}")
         scale = depth_scale_m
     n_pairs = len(discover_pairs(pairs_dir).pairs)
     with progress_bar("detecting boards", n_pairs) as advance:
