@@ -39,6 +39,7 @@ from .evaluation import (
     TRAIN_DISTANCES_M,
     Generalisation,
     compensation_generalisation,
+    registration_difference_px,
     registration_error_table,
 )
 from .figures import plot_overlay, plot_registration_error, plot_vox_curves
@@ -160,7 +161,9 @@ def _calibration(
         np.linalg.norm(t_true.inverse().translation_m - t_got.inverse().translation_m)
     )
     rot_err_deg = (t_true.inverse() @ t_got).angle_deg
-    reg_px = _registration_difference(true, got)
+    reg_err = registration_difference_px(true, got)
+    reg_err = reg_err[np.isfinite(reg_err)]
+    reg_px = {"rms": float(np.sqrt(np.mean(reg_err**2))), "max": float(reg_err.max())}
     rows: list[list[Any]] = [
         ["baseline (mm)", 1000 * true.baseline_m, 1000 * got.baseline_m],
         ["thermal fx (px)", true.thermal.fx, got.thermal.fx],
@@ -201,21 +204,6 @@ def _calibration(
         "registration_max_px": reg_px["max"],
     }
     return got
-
-
-def _registration_difference(a: Calibration, b: Calibration) -> dict[str, float]:
-    """Thermal-pixel distance between the two calibrations' mappings of depth pixels at
-    0.5-3 m (every 8th pixel), where both land in the thermal image."""
-    u, v = a.depth.pixel_grid()
-    pix = np.stack([u[::8, ::8], v[::8, ::8]], axis=-1)
-    diffs = []
-    for z in (0.5, 1.0, 2.0, 3.0):
-        pa = a.thermal.project(a.thermal_from_depth.apply(a.depth.deproject(pix, z)))
-        pb = b.thermal.project(b.thermal_from_depth.apply(b.depth.deproject(pix, z)))
-        ok = a.thermal.contains(pa) & np.isfinite(pb).all(axis=-1)
-        diffs.append(np.linalg.norm(pa[ok] - pb[ok], axis=-1))
-    d = np.concatenate(diffs)
-    return {"rms": float(np.sqrt(np.mean(d**2))), "max": float(d.max())}
 
 
 # -- 2-3. compensation ------------------------------------------------------------------------

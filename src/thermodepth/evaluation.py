@@ -5,10 +5,13 @@ Lives below ``registration`` and ``sim`` in the house: it may import both.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
+from .calibration import Calibration
 from .camera import RigidTransform
 from .compensation import (
     CompensationModel,
@@ -17,10 +20,14 @@ from .compensation import (
     apply_to_table,
     overall,
 )
+from .frames import FramePair
 from .registration import REGISTRATION_METHODS, Reason, Registration
-from .sim import DepthCameraModel, Rig, wall_scene
+from .sim import DepthCameraModel, Rig, default_calibration, wall_scene
 from .sim.protocols import SweepConfig, simulate_sweep
+from .sim.rig import GroundTruth
 from .sweep import SweepTable
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -39,28 +46,28 @@ class RegistrationError:
     nearest_right: float
 
 
-def registration_error(
-    distance_m: float, method: str, seed: int = 0, depth_noise: bool = True
-) -> RegistrationError:
-    """Registration error of ``method`` for a wall facing the rig at ``distance_m``.
-
-    Positions: ``"reproject"`` deprojects each measured depth and projects it into the thermal
-    camera (what its kernels compute, in float64); ``"paper"`` uses its affine upscale map.
-    The nearest-pixel check runs the method's own ``thermal_to_depth`` on an index image.
-    """
+def _wall(
+    distance_m: float, seed: int, depth_noise: bool, calibration: Calibration
+) -> tuple[FramePair, GroundTruth]:
+    """The first frame of a wall facing the rig at ``distance_m``, and its truth."""
     rig = Rig(
         wall_scene(distance_m),
         RigidTransform.identity("world", "depth"),
         seed=seed,
         depth_model=DepthCameraModel(noise=depth_noise),
+        calibration=calibration,
     )
-    frame = rig.frame()
-    truth = rig.truth()
-    cal = rig.calibration
-    reg = Registration(cal, method=method)
+    return rig.frame(), rig.truth()
+
+
+def _score(
+    reg: Registration, frame: FramePair, truth: GroundTruth, distance_m: float
+) -> RegistrationError:
+    """Registration error of ``reg`` on a frame, against its truth (see registration_error)."""
+    cal = reg.calibration
     seen = truth.visible_in_thermal & (frame.depth > 0)
     v, u = np.nonzero(seen)
-    if method == "paper":
+    if reg.method == "paper":
         ut, vt = reg.thermal_pixel_of_depth()
         pos = np.stack([ut[v, u], vt[v, u]], axis=-1).astype(np.float64)
     else:
@@ -75,7 +82,7 @@ def registration_error(
     true_index = true_px[:, 1] * w_t + true_px[:, 0]
     right = (reason[seen] == Reason.OK) & (got[seen] == true_index)
     return RegistrationError(
-        method,
+        reg.method,
         distance_m,
         float(np.nanmedian(err)),
         float(np.nanpercentile(err, 95)),
@@ -83,12 +90,55 @@ def registration_error(
     )
 
 
+def registration_error(
+    distance_m: float, method: str, seed: int = 0, depth_noise: bool = True
+) -> RegistrationError:
+    """Registration error of ``method`` for a wall facing the rig at ``distance_m``.
+
+    Positions: ``"reproject"`` deprojects each measured depth and projects it into the thermal
+    camera (what its kernels compute, in float64); ``"paper"`` uses its affine upscale map.
+    The nearest-pixel check runs the method's own ``thermal_to_depth`` on an index image.
+    """
+    cal = default_calibration()
+    frame, truth = _wall(distance_m, seed, depth_noise, cal)
+    return _score(Registration(cal, method), frame, truth, distance_m)
+
+
 def registration_error_table(
     distances_m: tuple[float, ...] = (0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 3.0),
     methods: tuple[str, ...] = REGISTRATION_METHODS,
 ) -> list[RegistrationError]:
-    """:func:`registration_error` for every method and distance."""
-    return [registration_error(d, m) for m in methods for d in distances_m]
+    """:func:`registration_error` for every method and distance (each wall rendered once,
+    each method's registration built once), method by method."""
+    cal = default_calibration()
+    regs = [Registration(cal, m) for m in methods]
+    by_distance = []
+    for d in distances_m:
+        frame, truth = _wall(d, 0, True, cal)
+        by_distance.append([_score(reg, frame, truth, d) for reg in regs])
+    return [row[i] for i in range(len(regs)) for row in by_distance]
+
+
+def registration_difference_px(
+    reference: Calibration,
+    other: Calibration,
+    depths_m: Sequence[float] = (0.5, 1.0, 2.0, 3.0),
+    step_px: int = 8,
+) -> FloatArray:
+    """How far apart (thermal pixels) two calibrations put the same depth pixels (every
+    ``step_px``-th each way, at each of ``depths_m``), over those ``reference`` maps inside
+    the thermal image; NaN where ``other`` maps a point nowhere (its distortion guard)."""
+    u, v = reference.depth.pixel_grid()
+    pix = np.stack([u[::step_px, ::step_px], v[::step_px, ::step_px]], axis=-1)
+    errors = []
+    for z in depths_m:
+        pa, pb = (
+            c.thermal.project(c.thermal_from_depth.apply(c.depth.deproject(pix, z)))
+            for c in (reference, other)
+        )
+        inside = reference.thermal.contains(pa)
+        errors.append(np.linalg.norm(pa[inside] - pb[inside], axis=-1))
+    return np.concatenate(errors)
 
 
 # -- compensation: does it generalise? -------------------------------------------------------
