@@ -25,7 +25,6 @@ conventions: pixel centres at integers), angles in degrees in the report.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections import Counter
@@ -47,6 +46,7 @@ from .calibration import (
     describe_validation_error,
     intrinsics_of,
     read_mapping,
+    write_mapping,
 )
 from .camera import Intrinsics, RigidTransform
 from .errors import InputError
@@ -1092,20 +1092,16 @@ def _with_warnings(result: CalibrationResult) -> CalibrationResult:
 
 def write_report_json(result: CalibrationResult, path: str | Path) -> None:
     """``calib_report.json``: :meth:`CalibrationResult.report_dict`."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(result.report_dict(), indent=2) + "\n", encoding="utf-8")
+    write_mapping(path, result.report_dict())
 
 
 def plot_report(result: CalibrationResult, path: str | Path) -> None:
     """A PNG: per-image RMS errors (bars per camera, the outlier limits as dotted lines,
     outlier images shaded red) and the thermal image's coverage by detected corners (corners
     per cell of :func:`coverage_grid` as a heat map, the corners on top)."""
-    import matplotlib
+    from .figures import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     names = [p.name for p in result.used]
     n = len(names)
     x = np.arange(n)
@@ -1161,8 +1157,4 @@ def plot_report(result: CalibrationResult, path: str | Path) -> None:
     )
     ax1.legend(fontsize=7, loc="lower right")
     fig.colorbar(im, ax=ax1, label="corners per cell", fraction=0.035)
-    fig.tight_layout()
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)

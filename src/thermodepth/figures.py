@@ -15,7 +15,8 @@ if TYPE_CHECKING:
     from .pipeline import FusedFrame
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
+    """matplotlib.pyplot on the file-only Agg backend (no display needed)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -24,18 +25,19 @@ def _pyplot() -> Any:
     return plt
 
 
-def _save(fig: Any, path: str | Path) -> Path:
+def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
+    """Lay out, write (creating the folder) and close a figure; returns the path."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    _pyplot().close(fig)
+    fig.savefig(out, dpi=dpi)
+    pyplot().close(fig)
     return out
 
 
 def plot_registration_error(rows: list[RegistrationError], path: str | Path) -> Path:
     """Median and 95th-percentile error (thermal px) vs distance per method, as a PNG."""
-    plt = _pyplot()
+    plt = pyplot()
     floor = 1e-3  # errors below it (exact depth quanta) are drawn on it: log axis
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for method in sorted({r.method for r in rows}):
@@ -61,14 +63,14 @@ def plot_registration_error(rows: list[RegistrationError], path: str | Path) -> 
     )
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | Path) -> list[Path]:
     """The paper's Fig. 13 (uncompensated readings vs VOx temperature per distance, with the
     model's curves) and Fig. 14 (compensated readings), one panel per target temperature.
     Points are means per 1 C of VOx. Returns the two PNG paths."""
-    plt = _pyplot()
+    plt = pyplot()
     refs = np.unique(table["reference_temp_c"])
     compensated = apply_to_table(model, table).temp_c
     paths = []
@@ -97,7 +99,7 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
             ax.set_title(f"{r:g} C target, {title}", fontsize=10)
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7, ncol=2)
-        paths.append(_save(fig, Path(out_dir) / name))
+        paths.append(save_figure(fig, Path(out_dir) / name))
     return paths
 
 
@@ -114,7 +116,7 @@ def plot_overlay(
 
     from .measure import hotspot_box_on_depth
 
-    plt = _pyplot()
+    plt = pyplot()
     cal = frame.calibration
     h, w = cal.depth.shape
     fig, ax = plt.subplots(figsize=(w / 100 + 1.6, h / 100 + 0.6), dpi=100)
@@ -157,4 +159,4 @@ def plot_overlay(
     fig.colorbar(im, ax=ax, fraction=0.03, pad=0.01, label="temperature (C)")
     ax.set_title(title or f"frame {frame.index}: VOx {frame.vox_temp_c:.2f} C", fontsize=10)
     ax.set_axis_off()
-    return _save(fig, path)
+    return save_figure(fig, path)
