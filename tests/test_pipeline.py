@@ -481,3 +481,6 @@ def test_replay_uses_the_recorded_device_depth_with_the_users_calibration(
     assert src.calibration.depth.cx == 641.25  # the device's ...
     assert src.calibration.depth_scale_m == 0.00025
     assert src.calibration.thermal == user.thermal  # ... with the user's thermal camera
+    # without one of the user's, nothing to fuse with: one line
+    res = runner.invoke(app, ["run", "--source", f"recording:{tmp_path / 'd.zarr'}"])
+    assert res.exit_code == 2 and "no calibration: give one in the settings" in res.output

@@ -29,7 +29,8 @@ import math
 import re
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -523,7 +524,8 @@ class CameraFit:
     """One camera's intrinsics from the board views, or given and held fixed.
 
     rms_px: RMS reprojection error over all points; per_view_rms_px (n,): per image;
-    board_from_views: ``camera_from_board`` per view (rvec, tvec as (3,) arrays, metres);
+    rvecs, tvecs: ``camera_from_board`` per view (Rodrigues rotation and translation as (3,)
+    arrays, metres);
     model: distortion model name (:data:`DISTORTION_MODELS`) or ``"fixed"``;
     std_px: standard deviations of fx, fy, cx, cy from OpenCV (NaN when fixed).
     """
@@ -701,6 +703,12 @@ def flag_outliers(errors_px: FloatArray) -> NDArray[np.bool_]:
     return out
 
 
+def per_view_errors_px(depth: CameraFit, thermal: CameraFit, stereo: StereoFit) -> FloatArray:
+    """Per-image RMS reprojection errors (n, 4), pixels: each camera's own fit, then the
+    stereo fit's depth and thermal sides (the columns the outlier rule judges)."""
+    return np.column_stack([depth.per_view_rms_px, thermal.per_view_rms_px, stereo.per_view_rms_px])
+
+
 def outlier_limits_px(errors_px: FloatArray) -> FloatArray:
     """The thresholds of :func:`flag_outliers` per column, pixels."""
     e = np.asarray(errors_px, dtype=np.float64)
@@ -754,11 +762,37 @@ class CalibrationResult:
     depth_points: tuple[FloatArray, ...]
     thermal_points: tuple[FloatArray, ...]
     thermal_inverted: tuple[bool, ...]
-    outliers: NDArray[np.bool_]
     dropped: tuple[ImagePair, ...]
     skipped: tuple[SkippedPair, ...]
     unmatched: tuple[tuple[Path, str], ...]
-    warnings: tuple[str, ...]
+
+    @cached_property
+    def errors_px(self) -> FloatArray:
+        """Per-image RMS reprojection errors (n, 4): depth, thermal, stereo depth and thermal
+        sides (:func:`per_view_errors_px`)."""
+        return per_view_errors_px(self.depth_fit, self.thermal_fit, self.stereo)
+
+    @cached_property
+    def outliers(self) -> NDArray[np.bool_]:
+        """The used images :func:`flag_outliers` flags."""
+        return flag_outliers(self.errors_px)
+
+    @cached_property
+    def warnings(self) -> tuple[str, ...]:
+        """What the user should know: poor thermal coverage, few pairs, outlier images."""
+        warn = []
+        cov = float(np.mean(self.thermal_coverage > 0))
+        if cov < 0.5:
+            warn.append(
+                f"the board covered {cov:.0%} of the thermal image: add poses near its edges "
+                "and corners, or distortion is extrapolated there"
+            )
+        if len(self.used) < 10:
+            warn.append(f"only {len(self.used)} pairs used: 15-25 well-spread poses fit better")
+        if self.outliers.any():
+            names = ", ".join(p.name for p, f in zip(self.used, self.outliers, strict=True) if f)
+            warn.append(f"outlier images: {names} (--drop-outliers fits without them)")
+        return tuple(warn)
 
     def per_image(self) -> list[dict[str, Any]]:
         """Per used pair: name, depth / thermal RMS (own fits), stereo RMS per camera,
@@ -795,13 +829,6 @@ class CalibrationResult:
         cal = self.calibration
         t = cal.thermal_from_depth
         cov_t, cov_d = self.thermal_coverage, self.depth_coverage
-        errors = np.column_stack(
-            [
-                self.depth_fit.per_view_rms_px,
-                self.thermal_fit.per_view_rms_px,
-                self.stereo.per_view_rms_px,
-            ]
-        )
         return {
             "board": str(self.board),
             "square_m": self.board.spacing_m,
@@ -822,7 +849,7 @@ class CalibrationResult:
             "outlier_limits_px": dict(
                 zip(
                     ["depth", "thermal", "stereo_depth", "stereo_thermal"],
-                    outlier_limits_px(errors).tolist(),
+                    outlier_limits_px(self.errors_px).tolist(),
                     strict=True,
                 )
             ),
@@ -1007,14 +1034,9 @@ def run_calibration(
         sfit = stereo_calibrate(obj, dp, tp, dfit.intrinsics, tfit.intrinsics)
         return dfit, tfit, sfit
 
-    def outliers_of(dfit: CameraFit, tfit: CameraFit, sfit: StereoFit) -> NDArray[np.bool_]:
-        return flag_outliers(
-            np.column_stack([dfit.per_view_rms_px, tfit.per_view_rms_px, sfit.per_view_rms_px])
-        )
-
     rows = found
     dfit, tfit, sfit = fit(rows)
-    flags = outliers_of(dfit, tfit, sfit)
+    flags = flag_outliers(per_view_errors_px(dfit, tfit, sfit))
     dropped: tuple[ImagePair, ...] = ()
     if drop_outliers and flags.any():
         keep = [r for r, f in zip(rows, flags, strict=True) if not f]
@@ -1026,12 +1048,11 @@ def run_calibration(
             )
         rows = keep
         dfit, tfit, sfit = fit(rows)
-        flags = outliers_of(dfit, tfit, sfit)
 
     calibration = Calibration(
         dfit.intrinsics, tfit.intrinsics, depth_scale_m, sfit.thermal_from_depth
     )
-    result = CalibrationResult(
+    return CalibrationResult(
         calibration=calibration,
         board=board,
         depth_fit=dfit,
@@ -1041,13 +1062,10 @@ def run_calibration(
         depth_points=tuple(r[1].points_px for r in rows),
         thermal_points=tuple(r[2].points_px for r in rows),
         thermal_inverted=tuple(r[2].inverted for r in rows),
-        outliers=flags,
         dropped=dropped,
         skipped=tuple(skipped),
         unmatched=listing.unmatched,
-        warnings=(),
     )
-    return _with_warnings(result)
 
 
 def _too_few_message(
@@ -1069,22 +1087,6 @@ def _too_few_message(
 def _names(names: list[str], limit: int = 5) -> str:
     more = f" and {len(names) - limit} more" if len(names) > limit else ""
     return ", ".join(names[:limit]) + more
-
-
-def _with_warnings(result: CalibrationResult) -> CalibrationResult:
-    warn = []
-    cov = float(np.mean(result.thermal_coverage > 0))
-    if cov < 0.5:
-        warn.append(
-            f"the board covered {cov:.0%} of the thermal image: add poses near its edges and "
-            "corners, or distortion is extrapolated there"
-        )
-    if len(result.used) < 10:
-        warn.append(f"only {len(result.used)} pairs used: 15-25 well-spread poses fit better")
-    if result.outliers.any():
-        names = ", ".join(p.name for p, f in zip(result.used, result.outliers, strict=True) if f)
-        warn.append(f"outlier images: {names} (--drop-outliers fits without them)")
-    return replace(result, warnings=tuple(warn))
 
 
 # -- report files -----------------------------------------------------------------------------
@@ -1113,7 +1115,7 @@ def plot_report(result: CalibrationResult, path: str | Path) -> None:
         ("thermal", result.thermal_fit.per_view_rms_px, "tab:orange"),
         ("stereo, thermal side", result.stereo.per_view_rms_px[:, 1], "tab:green"),
     ]
-    limits = outlier_limits_px(np.column_stack([v for _, v, _ in series]))
+    limits = outlier_limits_px(result.errors_px)[[0, 1, 3]]  # the columns drawn
     width = 0.27
     for k, (label, values, color) in enumerate(series):
         ax0.bar(x + (k - 1) * width, values, width, label=label, color=color)

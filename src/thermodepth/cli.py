@@ -762,13 +762,7 @@ def run(
     )
     try:
         src.require_pairs()
-        calibration = src.calibration or cal
-        if calibration is None:
-            raise InputError(
-                f"--source {source_spec}: no calibration; give one in the settings "
-                "(calibration: FILE)"
-            )
-        pipeline = Pipeline(settings, calibration)
+        pipeline = Pipeline(settings, src.calibration or cal)  # refuses neither
         recorded = pipeline_settings(settings_path, settings) if record else None
     except BaseException:
         src.close()
@@ -985,17 +979,16 @@ def demo_cmd(
 ) -> None:
     """The whole story on the simulated rig: calibrate, reproduce the paper, generalise,
     inspect, and write report.md / report.html."""
-    from .demo import DemoConfig, run_demo
+    from .demo import STEPS, DemoConfig, run_demo
 
-    steps = ["calibration", "compensation sweeps", "paper tables", "inspection", "registration"]
     with _progress() as bar:
-        task = bar.add_task("demo", total=len(steps))
+        task = bar.add_task("demo", total=len(STEPS))
 
         def step(name: str) -> None:
-            bar.update(task, description=f"demo: {name}", completed=steps.index(name))
+            bar.update(task, description=f"demo: {name}", completed=STEPS.index(name))
 
         summary = run_demo(out, DemoConfig(quick=quick), step)
-        bar.update(task, description="demo: done", completed=len(steps))
+        bar.update(task, description="demo: done", completed=len(STEPS))
     console.print(f"wrote {out / 'report.md'} and {out / 'report.html'}")
     for line in summary.get("findings", []):
         console.print(f"  - {line}", highlight=False)

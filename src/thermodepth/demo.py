@@ -95,11 +95,15 @@ class Timer:
             self.seconds[name] = time.perf_counter() - t0
 
 
+#: The demo's steps, in order, as ``run_demo`` announces them.
+STEPS = ("calibration", "compensation sweeps", "paper tables", "inspection", "registration")
+
+
 def run_demo(
     out_dir: str | Path, config: DemoConfig = DemoConfig(), step: Step | None = None
 ) -> dict[str, Any]:
     """Run the demo into ``out_dir``; returns the key figures (also ``summary.json``).
-    ``step(name)`` is called as each of the six steps starts (progress)."""
+    ``step(name)`` is called as each of :data:`STEPS` starts (progress)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     announce = step or (lambda name: None)
@@ -314,8 +318,6 @@ def _generalisation(gen: Generalisation, report: Report, summary: dict[str, Any]
 
 # -- 4. inspection ----------------------------------------------------------------------------
 
-CHIP_WORLD = np.array([0.06, -0.05, -0.003])  # the 70 C chip's centre on the plate
-
 
 def _inspection(
     out: Path,
@@ -336,8 +338,9 @@ def _inspection(
     results = []
     for i, d in enumerate(config.inspection_m):
         vox = vox_cycle[i % len(vox_cycle)]
+        scene = plate_scene(chip_temp_c=70.0)
         rig = Rig(
-            plate_scene(chip_temp_c=70.0),
+            scene,
             camera_pose(d),
             start_s=1.0,
             fpa=constant_fpa(vox + ZERO_C_IN_K),
@@ -346,7 +349,8 @@ def _inspection(
             calibration=default_calibration(),
         )
         pairs = list(rig.frames(4))
-        truth_chip = rig.pose.inverse().apply(CHIP_WORLD)
+        # the chip's face towards the cameras: where its hotspot lies
+        truth_chip = rig.pose.inverse().apply(scene.rects[scene.index("chip-z")].center_m)
         patch = _plate_patch(rig)
         row: list[Any] = [f"{d:g}{'' if d in TRAIN_DISTANCES_M else ' (held out)'}", vox]
         for name in models:
@@ -387,7 +391,7 @@ def _inspection(
                         "alarms": alarms,
                     }
                 )
-                if d in (0.5, 2.25, 1.0) or d == config.inspection_m[0]:
+                if d in (0.5, 2.25, 1.0):
                     plot_overlay(
                         last,
                         out / f"overlay_{d:g}m.png",

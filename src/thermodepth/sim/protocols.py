@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ..calibrate import Progress
 from ..calibration import BoardSpec, Calibration
 from ..camera import RigidTransform
 from ..radiometry import ZERO_C_IN_K, ObjectParams, RadiometryParams, raw_to_celsius
@@ -19,9 +20,6 @@ from ..sweep import SweepTable
 from .lepton import FpaProfile, LeptonModel, LeptonSensor, ramp_fpa, steps_fpa
 from .rig import Rig, default_calibration
 from .scene import Scene, board_pattern, camera_pose, plate_scene, target_scene
-
-Progress = Callable[[int], None]
-"""Called with the number of units of work just done (for progress bars)."""
 
 
 @dataclass(frozen=True)
