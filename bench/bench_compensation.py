@@ -10,14 +10,14 @@ from __future__ import annotations
 import numpy as np
 
 from thermodepth.compensation import PaperModel, RadianceModel
-from thermodepth.evaluation import compensation_generalisation
+from thermodepth.evaluation import training_sweep
 from thermodepth.radiometry import ObjectParams, RadiometryParams, raw_to_celsius
 
 from .common import measure, report
 
 
 def main() -> None:
-    ours = compensation_generalisation(samples=150).models["radiance"]
+    ours = RadianceModel.fit(training_sweep(samples=150))
     assert isinstance(ours, RadianceModel)
     paper = PaperModel.preset_2022()
     rng = np.random.default_rng(0)

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from thermodepth.compensation import save_model
-from thermodepth.evaluation import compensation_generalisation
+from thermodepth.compensation import RadianceModel, save_model
+from thermodepth.evaluation import training_sweep
 from thermodepth.measure import find_hotspots
 from thermodepth.pipeline import HotspotSettings, Pipeline, Settings
 from thermodepth.sim import Rig, camera_pose, plate_scene
@@ -23,7 +23,7 @@ from .common import counting, measure, report
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         model = Path(tmp) / "model.json"
-        save_model(compensation_generalisation(samples=150).models["radiance"], model)
+        save_model(RadianceModel.fit(training_sweep(samples=150)), model)
         settings = Settings(compensation=model, hotspots=HotspotSettings(threshold_c=50.0))
         rig = Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0), start_s=1.0)
         pipe = Pipeline(settings, rig.calibration)

@@ -23,16 +23,10 @@ from thermodepth.compensation import (
     save_model,
 )
 from thermodepth.errors import InputError
-from thermodepth.evaluation import compensation_generalisation
 from thermodepth.sim.protocols import SweepConfig, simulate_sweep
 from thermodepth.sweep import SweepTable, read_sweep_csv, write_sweep_csv
 
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def generalisation():  # type: ignore[no-untyped-def]
-    return compensation_generalisation(samples=200, seed=1)
 
 
 @pytest.fixture(scope="module")

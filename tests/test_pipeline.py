@@ -16,7 +16,7 @@ from thermodepth.calibration import PlanckSchema
 from thermodepth.cli import app
 from thermodepth.compensation import Flag, PaperModel, save_model
 from thermodepth.errors import InputError
-from thermodepth.evaluation import compensation_generalisation
+from thermodepth.evaluation import Generalisation
 from thermodepth.figures import plot_overlay
 from thermodepth.frames import FramePair
 from thermodepth.io.pointcloud import read_ply, write_ply
@@ -47,9 +47,9 @@ def inspection_rig(distance_m: float, fpa_c: float = 35.0, **kw: object) -> Rig:
 
 
 @pytest.fixture(scope="module")
-def model_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def model_path(tmp_path_factory: pytest.TempPathFactory, generalisation: Generalisation) -> Path:
     path = tmp_path_factory.mktemp("model") / "model.json"
-    save_model(compensation_generalisation(samples=150, seed=2).models["radiance"], path)
+    save_model(generalisation.models["radiance"], path)
     return path
 
 

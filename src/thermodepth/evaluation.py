@@ -172,24 +172,30 @@ class Generalisation:
         return rows
 
 
+def _sweep(samples: int, seed: int, **changes: object) -> SweepTable:
+    base = {
+        "distances_m": TRAIN_DISTANCES_M,
+        "plate_temps_c": TRAIN_TEMPS_C,
+        "samples": samples,
+        "seed": seed,
+    }
+    return simulate_sweep(SweepConfig(**{**base, **changes}))  # type: ignore[arg-type]
+
+
+def training_sweep(samples: int = 600, seed: int = 0) -> SweepTable:
+    """The sweep both methods are fitted on in :func:`compensation_generalisation` (the same
+    rows for the same ``samples`` and ``seed``), for callers that only need a fitted model."""
+    return _sweep(samples, seed * 10, vox_steps_c=TRAIN_VOX_STEPS_C)
+
+
 def compensation_generalisation(samples: int = 600, seed: int = 0) -> Generalisation:
     """Simulate the training and held-out sweeps (``samples`` frames per distance and
     target) and fit both methods; see :class:`Generalisation`."""
-
-    def sweep(i: int, **kw: object) -> SweepTable:
-        base = {
-            "distances_m": TRAIN_DISTANCES_M,
-            "plate_temps_c": TRAIN_TEMPS_C,
-            "samples": samples,
-            "seed": seed * 10 + i,
-        }
-        return simulate_sweep(SweepConfig(**{**base, **kw}))  # type: ignore[arg-type]
-
-    train = sweep(0, vox_steps_c=TRAIN_VOX_STEPS_C)
+    train = training_sweep(samples, seed)
     tests = {
-        "held-out distances": sweep(1, distances_m=(0.75, 1.25, 2.25, 3.0)),
-        "held-out targets": sweep(2, plate_temps_c=(45.0, 60.0, 80.0)),
-        "VOx between/beyond": sweep(3, vox_min_c=22.0, vox_max_c=43.0),
+        "held-out distances": _sweep(samples, seed * 10 + 1, distances_m=(0.75, 1.25, 2.25, 3.0)),
+        "held-out targets": _sweep(samples, seed * 10 + 2, plate_temps_c=(45.0, 60.0, 80.0)),
+        "VOx between/beyond": _sweep(samples, seed * 10 + 3, vox_min_c=22.0, vox_max_c=43.0),
     }
     models: dict[str, CompensationModel] = {
         "radiance": RadianceModel.fit(train),
