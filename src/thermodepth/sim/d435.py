@@ -122,12 +122,11 @@ def depth_units(
 
 
 def ir_image(
-    albedo: FloatArray, supersample: int, model: DepthCameraModel, rng: np.random.Generator
+    albedo: FloatArray, model: DepthCameraModel, rng: np.random.Generator
 ) -> NDArray[np.uint8]:
-    """8-bit infrared image from the near-IR albedo of each sub-ray (emitter off, even
-    illumination), averaged over each pixel's sub-rays, with read noise."""
-    h, w = albedo.shape[0] // supersample, albedo.shape[1] // supersample
-    pix = albedo.reshape(h, supersample, w, supersample).mean(axis=(1, 3)) * model.ir_gain
+    """8-bit infrared image from each pixel's near-IR albedo (H, W) (the mean over its
+    sub-rays; emitter off, even illumination), with read noise."""
+    pix = albedo * model.ir_gain
     if model.noise:
         pix = pix + rng.standard_normal(pix.shape) * model.ir_noise_dn
     return np.clip(np.rint(pix), 0, 255).astype(np.uint8)

@@ -139,9 +139,10 @@ class Rig:
 
     @cached_property
     def _ir_albedo(self) -> FloatArray:
+        """Near-IR albedo per depth pixel (H, W): the mean over its sub-rays (per pose)."""
         ss = self.depth_model.ir_supersample
         hits = cast(self.scene, self.depth_from_world, self.calibration.depth, ss)
-        return surface_properties(self.scene, hits)[2]
+        return footprint_and_blur(surface_properties(self.scene, hits)[2], ss, 0.0)
 
     def frame(self) -> FramePair:
         """The next frame pair: thermal frame k at start_s + k / fps, paired with the nearest
@@ -160,11 +161,7 @@ class Rig:
             self._shadow,
         )
         counts, telemetry = self.sensor.read(t_thermal, self.aperture)
-        ir = (
-            ir_image(self._ir_albedo, self.depth_model.ir_supersample, self.depth_model, self.rng)
-            if self.with_ir
-            else None
-        )
+        ir = ir_image(self._ir_albedo, self.depth_model, self.rng) if self.with_ir else None
         self._index += 1
         return FramePair(
             depth, np.asarray(counts, dtype=np.uint16), t_depth, t_thermal, telemetry, k, ir
