@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
@@ -103,7 +103,7 @@ class LeptonModel:
     def max_counts(self) -> int:
         return 2**self.bits - 1
 
-    @property
+    @cached_property
     def noise_counts(self) -> float:
         """Temporal noise SD in counts: NETD times dS/dT at 300 K."""
         s = counts_from_kelvin([299.95, 300.05], self.planck)

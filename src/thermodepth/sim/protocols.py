@@ -16,7 +16,7 @@ from ..calibrate import Progress
 from ..calibration import BoardSpec, Calibration
 from ..camera import RigidTransform
 from ..radiometry import ZERO_C_IN_K, ObjectParams, RadiometryParams, raw_to_celsius
-from ..sweep import SweepTable
+from ..sweep import COLUMNS, SweepTable
 from .lepton import FpaProfile, LeptonModel, LeptonSensor, ramp_fpa, steps_fpa
 from .rig import Rig, default_calibration
 from .scene import Scene, board_pattern, camera_pose, plate_scene, target_scene
@@ -86,20 +86,7 @@ def simulate_sweep(
             config.emissivity, 0.0, config.ambient_temp_c, config.humidity_pct
         ),
     )
-    rows: dict[str, list[float]] = {
-        c: []
-        for c in (
-            "distance_m",
-            "vox_temp_c",
-            "measured_temp_c",
-            "reference_temp_c",
-            "ambient_temp_c",
-            "humidity_pct",
-            "emissivity",
-            "raw_counts",
-            "n",
-        )
-    }
+    blocks: list[dict[str, NDArray[np.float64]]] = []  # one per plate temperature and distance
     rng = np.random.default_rng(config.seed)
     for plate_c in config.plate_temps_c:
         scene = plate_scene(
@@ -111,26 +98,31 @@ def simulate_sweep(
             rig = Rig(scene, camera_pose(d), lepton=lepton)
             roi = rig.aperture[plate_roi(rig, config.roi_half_px)]
             sensor = LeptonSensor(lepton, roi.shape, config.fpa_profile(lepton.fps), rng)
-            for i in range(config.samples):
-                counts, tel = sensor.read(i / lepton.fps, roi)
-                if tel.in_ffc:
-                    continue
-                temp = raw_to_celsius(counts, params)
-                for name, value in (
-                    ("distance_m", d),
-                    ("vox_temp_c", tel.fpa_temp_c),
-                    ("measured_temp_c", float(np.mean(temp))),
-                    ("reference_temp_c", plate_c),
-                    ("ambient_temp_c", config.ambient_temp_c),
-                    ("humidity_pct", config.humidity_pct),
-                    ("emissivity", config.emissivity),
-                    ("raw_counts", float(np.mean(counts))),
-                    ("n", 1.0),
-                ):
-                    rows[name].append(value)
+            counts, vox = [], []
+            for i in range(config.samples):  # one at a time: the sensor carries state
+                c, tel = sensor.read(i / lepton.fps, roi)
+                if not tel.in_ffc:
+                    counts.append(c)
+                    vox.append(tel.fpa_temp_c)
+            n = len(counts)
+            stack = np.array(counts, dtype=np.float64).reshape(n, roi.size)
+            blocks.append(
+                {
+                    "distance_m": np.full(n, d),
+                    "vox_temp_c": np.array(vox),
+                    "measured_temp_c": raw_to_celsius(stack, params).mean(axis=1),
+                    "reference_temp_c": np.full(n, plate_c),
+                    "ambient_temp_c": np.full(n, config.ambient_temp_c),
+                    "humidity_pct": np.full(n, config.humidity_pct),
+                    "emissivity": np.full(n, config.emissivity),
+                    "raw_counts": stack.mean(axis=1),
+                    "n": np.ones(n),
+                }
+            )
             if progress:
                 progress(1)
-    return SweepTable({name: np.array(v) for name, v in rows.items()}, source="simulated sweep")
+    columns = {c: np.concatenate([np.empty(0)] + [b[c] for b in blocks]) for c in COLUMNS}
+    return SweepTable(columns, source="simulated sweep")
 
 
 def aggregate_by_vox(table: SweepTable, step_c: float = 1.0) -> SweepTable:
