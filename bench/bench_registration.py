@@ -61,6 +61,7 @@ from .peers import (
     reference_thermal_to_depth,
     register_depth_cv2,
     registration_tolerance,
+    thermal_index_image,
     thermal_to_depth_agreement,
     without_thermal_distortion,
 )
@@ -176,8 +177,7 @@ def _agreement(
 ) -> dict[str, str]:
     """How far the contenders agree on one frame (definitions in bench/peers.py)."""
     reg = Registration(cal)
-    t = cal.thermal
-    index = (np.arange(t.width * t.height) + 1).astype(np.uint16).reshape(t.shape)
+    index = thermal_index_image(cal)
     ours_d2t = reg.depth_to_thermal(depth)
     ours_t2d = reg.thermal_to_depth(depth, index)
     notes: dict[str, str] = {}

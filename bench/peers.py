@@ -439,6 +439,12 @@ def reference_thermal_to_depth(
     return values, reason
 
 
+def thermal_index_image(cal: Calibration) -> NDArray[np.uint16]:
+    """1 + the flat index of every thermal pixel: tells which pixel a sampler took (0 = none)."""
+    t = cal.thermal
+    return (np.arange(t.width * t.height) + 1).astype(np.uint16).reshape(t.shape)
+
+
 def near_pixel_border(thermal_u: F64, thermal_v: F64, eps_px: float = 1e-3) -> NDArray[np.bool_]:
     """True where a thermal coordinate lies within ``eps_px`` of a pixel border (borders at
     k - 0.5, the image edges included): float32 and float64 may round these either way."""

@@ -503,9 +503,7 @@ def test_report_files(sim_result: CalibrationResult, tmp_path: Path) -> None:
     assert off == pytest.approx(
         [sim_result.calibration.thermal.cx - 79.5, sim_result.calibration.thermal.cy - 59.5]
     )
-    assert rep["stereo"]["baseline_mm"] == pytest.approx(
-        1000 * np.linalg.norm(sim_result.calibration.thermal_from_depth.translation_m)
-    )
+    assert rep["stereo"]["baseline_mm"] == pytest.approx(1000 * sim_result.calibration.baseline_m)
     assert 0.5 < rep["coverage"]["thermal_fraction"] <= 1.0  # measured 0.77
     assert np.array(rep["coverage"]["thermal_cells"]).sum() == 54 * len(sim_result.used)
     png = cv2.imread(str(tmp_path / "calib_report.png"))

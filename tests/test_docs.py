@@ -22,8 +22,8 @@ BLOCKS = [
 def test_doc_python_example(block: str, doc: Path) -> None:
     # each top-level `print(...)  # value` line documents the value it prints
     claims = re.findall(r"^print\(.*\)[ \t]*#[ \t]*(.+)$", block, flags=re.M)
+    assert claims, "the example documents its output"
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         exec(compile(block, str(doc), "exec"), {})
-    if claims:
-        assert out.getvalue().splitlines() == claims
+    assert out.getvalue().splitlines() == claims

@@ -25,6 +25,7 @@ from bench.peers import (
     register_depth_cv2,
     registration_tolerance,
     rs_extrinsics,
+    thermal_index_image,
     thermal_to_depth_agreement,
     without_thermal_distortion,
 )
@@ -37,12 +38,6 @@ from thermodepth.sim import Rig, default_calibration, occlusion_scene
 
 F64 = NDArray[np.float64]
 IDENTITY = RigidTransform.identity("world", "depth")
-
-
-def thermal_index_image(cal: Calibration) -> NDArray[np.uint16]:
-    """1 + the flat index of every thermal pixel: tells which pixel a sampler took (0 = none)."""
-    t = cal.thermal
-    return (np.arange(t.width * t.height) + 1).astype(np.uint16).reshape(t.shape)
 
 
 @pytest.fixture(scope="module")

@@ -30,7 +30,7 @@ from thermodepth.pipeline import (
     Settings,
 )
 from thermodepth.registration import Reason, Registration
-from thermodepth.sim import Rig, camera_pose, constant_fpa, plate_scene
+from thermodepth.sim import Rig, camera_pose, constant_fpa, default_calibration, plate_scene
 
 runner = CliRunner()
 CHIP = np.array([0.06, -0.05, -0.003])  # the chip's centre in the world (plate at the origin)
@@ -72,7 +72,7 @@ def test_inspection_frame_at_half_a_metre() -> None:
     assert frame.temp_thermal_c.shape == (120, 160) and frame.temp_depth_c.shape == (720, 1280)
     h = frame.hotspots[0]
     assert h.resolvable and h.max_c == pytest.approx(70.0, abs=0.5)
-    truth_centre = rig.pose.inverse().apply(CHIP)
+    truth_centre = rig.depth_from_world.apply(CHIP)
     assert np.linalg.norm(np.array(h.centroid_m) - truth_centre) < 0.01
     assert h.distance_m == pytest.approx(np.linalg.norm(truth_centre), abs=0.01)
     # 2 x 2 cm chip = 4 cm^2; the region above 50 C includes some of the optics' halo
@@ -139,7 +139,7 @@ def test_reflected_temperature_reaches_every_compensation(model_path: Path, tmp_
 
 
 def test_radiance_model_refuses_other_radiometry(model_path: Path) -> None:
-    cal = inspection_rig(1.0).calibration
+    cal = default_calibration()
     for radiometry in (
         RadiometrySettings(method="thermimage"),
         RadiometrySettings(planck=PlanckSchema(R=1e5, B=1400, F=1, O=6000)),
@@ -264,7 +264,7 @@ def test_point_cloud_and_overlay(tmp_path: Path) -> None:
     np.testing.assert_allclose(back_pts, pts, atol=1e-6)
     np.testing.assert_array_equal(back_t, temps)
     hot = back_pts[back_t > 60]  # the chip: ~0.5 m in front, 6 cm right, 5 cm up
-    np.testing.assert_allclose(np.median(hot, axis=0), rig.pose.inverse().apply(CHIP), atol=0.01)
+    np.testing.assert_allclose(np.median(hot, axis=0), rig.depth_from_world.apply(CHIP), atol=0.01)
     png = plot_overlay(frame, tmp_path / "overlay.png")
     import cv2
 
@@ -416,7 +416,7 @@ def test_run_session_refuses_a_single_camera_and_closes_it(tmp_path: Path) -> No
     from thermodepth.sources.paired import StreamSource
 
     camera = SimCamera("depth", 2)
-    pipeline = Pipeline(Settings(), Rig(plate_scene(), camera_pose(1.0)).calibration)
+    pipeline = Pipeline(Settings(), default_calibration())
     with pytest.raises(InputError, match="sim-depth: gives depth only"):
         run_session(StreamSource(camera, "depth"), pipeline, record=tmp_path / "x.zarr")
     assert camera.closed and not (tmp_path / "x.zarr").exists()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -414,9 +415,16 @@ def small_recording(path: Path, n: int) -> None:
             w.add(Match(d, t, pair_of(d, t, i)))
 
 
-def test_tables_are_chunked_so_a_recording_opens_from_few_files(tmp_path: Path) -> None:
-    out = tmp_path / "t.zarr"
+@pytest.fixture(scope="module")
+def two_chunks(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A recording whose tables span two chunks (300 pairs); copy it before changing it."""
+    out = tmp_path_factory.mktemp("chunks") / "t.zarr"
     small_recording(out, TABLE_CHUNK_ROWS + 44)
+    return out
+
+
+def test_tables_are_chunked_so_a_recording_opens_from_few_files(two_chunks: Path) -> None:
+    out = two_chunks
     for table in ("depth/meta", "thermal/meta", "pairs"):
         chunks = sorted(p.parent.name for p in (out / table / "c").rglob("0") if p.is_file())
         assert chunks == ["0", "1"], table  # 300 rows in two files, not 300
@@ -425,9 +433,11 @@ def test_tables_are_chunked_so_a_recording_opens_from_few_files(tmp_path: Path) 
     assert [int(p.depth[0, 0]) for p in rec.pairs()] == list(range(300))
 
 
-def test_corrupt_meta_chunk_is_unreadable_not_missing_one_warning(tmp_path: Path) -> None:
+def test_corrupt_meta_chunk_is_unreadable_not_missing_one_warning(
+    tmp_path: Path, two_chunks: Path
+) -> None:
     out = tmp_path / "m.zarr"
-    small_recording(out, TABLE_CHUNK_ROWS + 44)
+    shutil.copytree(two_chunks, out)
     chunk = out / "thermal" / "meta" / "c" / "0" / "0"  # rows 0-255
     raw = bytearray(chunk.read_bytes())
     raw[100] ^= 0xFF

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bench.peers import near_pixel_border, nearest_index
 
 from thermodepth.calibration import Calibration
 from thermodepth.camera import RigidTransform
@@ -29,9 +30,13 @@ INDEX = np.arange(h * w, dtype=np.float32).reshape(h, w)
 
 
 def _near_border(px: np.ndarray, eps: float) -> np.ndarray:
-    """True where a thermal position lies within ``eps`` px of a pixel border."""
-    frac = (px + 0.5) % 1.0
-    return np.minimum(frac, 1.0 - frac).min(axis=-1) < eps
+    """True where a thermal position (..., 2) lies within ``eps`` px of a pixel border."""
+    return near_pixel_border(px[..., 0], px[..., 1], eps)
+
+
+def _nearest(px: np.ndarray) -> np.ndarray:
+    """Flat index of the thermal pixel nearest to each position (..., 2); -1 where NaN."""
+    return nearest_index(CAL, px[..., 0], px[..., 1])[0]
 
 
 def _shift_px(z_m: float) -> float:
@@ -47,8 +52,7 @@ def test_nearest_thermal_pixel_is_right_and_occlusion_flagged(box_m: float, wall
     got, reason = Registration(rig.calibration).thermal_to_depth(frame.depth, INDEX)
     valid = frame.depth > 0
     visible = truth.visible_in_thermal & valid
-    true_px = np.floor(truth.thermal_pixel_of_depth + 0.5)
-    right = (reason == Reason.OK) & (got == true_px[..., 1] * w + true_px[..., 0])
+    right = (reason == Reason.OK) & (got == _nearest(truth.thermal_pixel_of_depth))
     # The depth noise shifts a point ~0.015 px at any distance (sigma_z ~ z^2, parallax ~
     # 1/z^2): a point that close to a pixel border is a tie no method can call. 0.05 px is
     # over 3 sigma of that shift.
@@ -160,7 +164,7 @@ def test_depth_camera_with_distortion_uses_full_ray_grid() -> None:
     )
     ok = reason == Reason.OK
     clear = ok & ~_near_border(px, 1e-3)
-    expected = np.floor(px[..., 1] + 0.5) * w + np.floor(px[..., 0] + 0.5)
+    expected = _nearest(px)
     assert ok.sum() > 300_000
     assert (got[clear] == expected[clear]).mean() > 0.9999
 

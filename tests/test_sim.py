@@ -37,7 +37,13 @@ from thermodepth.sim.lepton import (
     measured_radiance,
     radiance_table,
 )
-from thermodepth.sim.protocols import SweepConfig, plate_roi, simulate_sweep, simulate_targets
+from thermodepth.sim.protocols import (
+    SweepConfig,
+    plate_roi,
+    simulate_sweep,
+    simulate_targets,
+    write_frames,
+)
 from thermodepth.sweep import read_sweep_csv, write_sweep_csv
 
 K0 = 273.15
@@ -281,8 +287,7 @@ def test_calibration_is_valid_and_non_trivial(tmp_path: Path) -> None:
     assert 0.03 <= back.baseline_m <= 0.05
     # parallax at 0.5 m is several thermal pixels
     assert cal.thermal.fx * cal.baseline_m / 0.5 > 8
-    hfov = np.degrees(2 * np.arctan(80 / cal.thermal.fx))
-    assert hfov == pytest.approx(56.0, abs=0.1)
+    assert cal.thermal.hfov_deg == pytest.approx(56.0, abs=0.1)
 
 
 def test_sweep_rows_and_csv_round_trip(tmp_path: Path) -> None:
@@ -316,3 +321,21 @@ def test_target_captures(tmp_path: Path) -> None:
     found, _ = cv2.findChessboardCornersSB(ir, (9, 6))
     assert found
     assert np.ptp(th) > 300  # the heated board stands out: paint vs bare metal
+
+
+def test_written_frames_carry_their_truth(tmp_path: Path) -> None:
+    paths = write_frames(tmp_path, plate_scene(chip_temp_c=70.0), 1.0, 2, seed=4)
+    assert [p.name for p in paths] == ["frame_000000.npz", "frame_000001.npz"]
+    cal = Calibration.load(tmp_path / "calibration.yaml")
+    rig = Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0), seed=4, start_s=1.0)
+    truth = rig.truth()
+    for path, pair in zip(paths, rig.frames(2), strict=True):
+        with np.load(path) as z:
+            np.testing.assert_array_equal(z["depth"], pair.depth)
+            np.testing.assert_array_equal(z["thermal"], pair.thermal)
+            assert z["thermal_time_s"] == pair.thermal_time_s
+            np.testing.assert_array_equal(
+                z["thermal_range_m"], truth.thermal_range_m.astype(np.float32)
+            )
+            assert z["visible_in_thermal"].sum() == truth.visible_in_thermal.sum() > 0
+    assert cal.thermal == rig.calibration.thermal

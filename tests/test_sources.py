@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from test_telemetry import telemetry_bytes, words_of
 from thermodepth.errors import InputError
 from thermodepth.frames import DepthFrame, FfcState, Telemetry, ThermalFrame
 from thermodepth.io.recording import Recording
@@ -24,7 +25,6 @@ from thermodepth.sources.base import DeviceLostError
 from thermodepth.sources.lepton import LeptonCamera, list_purethermal, list_video_devices
 from thermodepth.sources.paired import PairedSource
 from thermodepth.sources.realsense import RealSenseCamera
-from thermodepth.sources.telemetry import parse_telemetry
 
 TEL = Telemetry(frame_counter=0, fpa_temp_k=305.0, housing_temp_k=304.0)
 
@@ -67,15 +67,6 @@ class FakeThermal:
         self.closed = True
 
 
-def telemetry_words(frame_counter: int, ffc_state: int = 3) -> np.ndarray:
-    words = np.zeros(320, np.uint16)
-    words[0] = 0x0E0E
-    words[3] = ffc_state << 4
-    words[20], words[21] = frame_counter & 0xFFFF, frame_counter >> 16
-    words[24] = 30815
-    return words
-
-
 class FakeCapture:
     """Stands in for cv2.VideoCapture on a PureThermal: ``frames`` are returned by read()."""
 
@@ -101,9 +92,15 @@ class FakeCapture:
         self.released = True
 
 
+def telemetry_rows(k: int, ffc_state: int = 3) -> np.ndarray:
+    """The two telemetry rows (2, 160) of frame ``k`` as the IDD lays them out (TLinear
+    resolution word 0: 0.1 K)."""
+    words = words_of(telemetry_bytes(frame_counter=k, ffc_state=ffc_state, tlinear_res=0))
+    return words.reshape(2, 160)
+
+
 def lepton_frame(k: int, ffc_state: int = 3) -> np.ndarray:
-    image = np.full((120, 160), 8000 + k, np.uint16)
-    return np.vstack([image, telemetry_words(k, ffc_state).reshape(2, 160)])
+    return np.vstack([np.full((120, 160), 8000 + k, np.uint16), telemetry_rows(k, ffc_state)])
 
 
 def use_capture(monkeypatch: pytest.MonkeyPatch, cap: FakeCapture) -> None:
@@ -400,10 +397,6 @@ def test_no_purethermal_lists_what_was_found(tmp_path: Path) -> None:
         LeptonCamera(sysfs=tmp_path / "none")
 
 
-def test_lepton_telemetry_words_builder_matches_parser() -> None:
-    assert parse_telemetry(telemetry_words(70000)).frame_counter == 70000
-
-
 class EndlessCapture(FakeCapture):
     """read() returns ``make(k)`` forever, one frame per 5 ms; fails the test after 3 s (a
     camera that never gives up)."""
@@ -435,7 +428,7 @@ def test_lepton_without_telemetry_stops_with_one_line(monkeypatch: pytest.Monkey
 
 def test_lepton_telemetry_in_the_header_is_named(monkeypatch: pytest.MonkeyPatch) -> None:
     def header_frame(k: int) -> np.ndarray:
-        return np.vstack([telemetry_words(k).reshape(2, 160), np.full((120, 160), 8000, np.uint16)])
+        return np.vstack([telemetry_rows(k), np.full((120, 160), 8000, np.uint16)])
 
     use_capture(monkeypatch, EndlessCapture(header_frame))
     with pytest.raises(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import string
 import tempfile
 from pathlib import Path
@@ -20,8 +21,12 @@ words = st.text(alphabet=string.ascii_letters + " _-", min_size=1, max_size=8).f
 )
 
 
+_DIR = tempfile.TemporaryDirectory(prefix="test-sweep-")  # removed when the run ends
+_files = itertools.count()
+
+
 def _tmp(text: str) -> Path:
-    path = Path(tempfile.mkdtemp()) / "sweep.csv"
+    path = Path(_DIR.name) / f"sweep{next(_files)}.csv"
     path.write_text(text, encoding="utf-8")
     return path
 

@@ -7,6 +7,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -322,7 +323,15 @@ def write_frames(
     out.mkdir(parents=True, exist_ok=True)
     rig = Rig(scene, camera_pose(distance_m), seed=seed, start_s=1.0)
     rig.calibration.save(out / "calibration.yaml")
-    truth = rig.truth()
+    truth = rig.truth()  # one pose: the same truth in every frame, converted once
+    truth_f32: dict[str, Any] = {
+        "depth_z_m": _f32(truth.depth_z_m),
+        "depth_temp_k": _f32(truth.depth_temp_k),
+        "thermal_pixel_of_depth": _f32(truth.thermal_pixel_of_depth),
+        "visible_in_thermal": truth.visible_in_thermal,
+        "thermal_temp_k": _f32(truth.thermal_temp_k),
+        "thermal_range_m": _f32(truth.thermal_range_m),
+    }
     written = []
     for frame in rig.frames(n_frames):
         path = out / f"frame_{frame.index:06d}.npz"
@@ -336,12 +345,7 @@ def write_frames(
             depth_time_s=frame.depth_time_s,
             thermal_time_s=frame.thermal_time_s,
             telemetry=json.dumps(tel),
-            depth_z_m=_f32(truth.depth_z_m),
-            depth_temp_k=_f32(truth.depth_temp_k),
-            thermal_pixel_of_depth=_f32(truth.thermal_pixel_of_depth),
-            visible_in_thermal=truth.visible_in_thermal,
-            thermal_temp_k=_f32(truth.thermal_temp_k),
-            thermal_range_m=_f32(truth.thermal_range_m),
+            **truth_f32,
         )
         written.append(path)
         if progress:
