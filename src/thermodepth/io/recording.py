@@ -206,6 +206,7 @@ class _Stream:
         self.arrays: dict[str, zarr.Array] = {}
         self.shape: tuple[int, int] | None = None
         self.with_ir = False
+        self.bytes = 0  # uncompressed image bytes written
 
     def create(self, shape: tuple[int, int], with_ir: bool) -> None:
         g = self.root.require_group(self.name)
@@ -217,7 +218,26 @@ class _Stream:
         self.meta = _TableWriter(self.arrays["meta"], np.nan)
         self.shape, self.with_ir = shape, with_ir
 
-    def append(self, image: NDArray[Any], ir: NDArray[Any] | None, meta: list[float]) -> int:
+    def append(
+        self, index: int, image: NDArray[Any], ir: NDArray[Any] | None, meta: list[float]
+    ) -> int:
+        """Write frame ``index`` (a 2-D uint16 image, optional uint8 IR of the same size);
+        returns its row. The first frame fixes the stream's size and whether it has IR."""
+        image = np.asarray(image)
+        if image.dtype != np.uint16 or image.ndim != 2:
+            raise InputError(
+                f"{self.name} frame {index}: expected (H, W) uint16, got {image.shape} "
+                f"{image.dtype}"
+            )
+        h, w = image.shape
+        if self.shape is None:
+            self.create((h, w), ir is not None)
+        if (h, w) != self.shape or (ir is not None) != self.with_ir:
+            sh, sw = self.shape  # type: ignore[misc]
+            raise InputError(
+                f"{self.name} frame {index}: {w}x{h}{' + IR' if ir is not None else ''} "
+                f"differs from the recording's {sw}x{sh}{' + IR' if self.with_ir else ''}"
+            )
         row = self.rows
         _grow(list(self.arrays.values()), row)  # meta last
         self.arrays["image"][row] = image
@@ -225,6 +245,7 @@ class _Stream:
             self.arrays["ir"][row] = ir
         self.meta.write(row, np.asarray(meta, dtype=np.float64))  # commit marker: last
         self.rows += 1
+        self.bytes += image.nbytes + (0 if ir is None else ir.nbytes)
         return row
 
     def trim(self) -> None:
@@ -312,7 +333,6 @@ class RecordingWriter:
         self.thermal = _Stream(self.root, "thermal", THERMAL_META)
         self.pairs: _TableWriter | None = None
         self.n_pairs = 0
-        self.bytes_written = 0  # uncompressed image bytes
         self._depth_rows: OrderedDict[int, int] = OrderedDict()
         self._thermal_rows: OrderedDict[int, int] = OrderedDict()
         self.closed = False
@@ -323,46 +343,24 @@ class RecordingWriter:
         """Write a depth frame; returns its row. Every frame must have the first one's shape
         (and an IR image if the first had one)."""
         depth = np.asarray(frame.depth)
-        if depth.dtype != np.uint16 or depth.ndim != 2:
-            raise InputError(
-                f"depth frame: expected (H, W) uint16, got {depth.shape} {depth.dtype}"
-            )
-        if self.depth.shape is None:
-            self.depth.create((depth.shape[0], depth.shape[1]), frame.ir is not None)
-        if depth.shape != self.depth.shape or (frame.ir is not None) != self.depth.with_ir:
-            raise InputError(
-                f"depth frame {frame.index}: {depth.shape[1]}x{depth.shape[0]}"
-                f"{' + IR' if frame.ir is not None else ''} differs from the recording's "
-                f"{self.depth.shape[1]}x{self.depth.shape[0]}"  # type: ignore[index]
-                f"{' + IR' if self.depth.with_ir else ''}"
-            )
         ir = None if frame.ir is None else np.asarray(frame.ir, dtype=np.uint8)
-        row = self.depth.append(
-            depth, ir, [frame.time_s, float(frame.index), float(checksum(depth, ir))]
-        )
-        self.bytes_written += depth.nbytes + (0 if ir is None else ir.nbytes)
+        meta = [frame.time_s, float(frame.index), float(checksum(depth, ir))]
+        row = self.depth.append(frame.index, depth, ir, meta)
         _remember(self._depth_rows, frame.index, row)
         return row
 
     def add_thermal(self, frame: ThermalFrame) -> int:
-        """Write a thermal frame and its telemetry; returns its row."""
+        """Write a thermal frame (raw counts) and its telemetry; returns its row."""
         counts = np.asarray(frame.counts)
-        if counts.dtype != np.uint16 or counts.ndim != 2:
-            raise InputError(
-                f"thermal frame: expected (h, w) uint16 counts, got {counts.shape} {counts.dtype}"
-            )
-        if self.thermal.shape is None:
-            self.thermal.create((counts.shape[0], counts.shape[1]), False)
-        if counts.shape != self.thermal.shape:
-            raise InputError(
-                f"thermal frame {frame.index}: shape {counts.shape} differs from the "
-                f"recording's {self.thermal.shape}"
-            )
         meta = [frame.time_s, float(frame.index), float(checksum(counts))]
-        row = self.thermal.append(counts, None, meta + telemetry_row(frame.telemetry))
-        self.bytes_written += counts.nbytes
+        row = self.thermal.append(frame.index, counts, None, meta + telemetry_row(frame.telemetry))
         _remember(self._thermal_rows, frame.index, row)
         return row
+
+    @property
+    def bytes_written(self) -> int:
+        """Uncompressed image bytes written."""
+        return self.depth.bytes + self.thermal.bytes
 
     def add_pair_rows(self, depth_row: int, thermal_row: int, index: int) -> None:
         """Write a pair as references to recorded rows (after both frames are written)."""
@@ -752,33 +750,33 @@ class Recording:
     def with_ir(self) -> bool:
         return "depth/ir" in self._arrays
 
-    def depth_frame(self, row: int) -> DepthFrame:
-        """The depth frame at ``row``; CorruptFrameError if it cannot be read or fails its CRC."""
-        self._depth.check(row, f"depth frame {row}: meta row")
-        meta = self._depth.rows[row]
+    def _read(
+        self, stream: str, row: int, names: tuple[str, ...]
+    ) -> tuple[NDArray[np.float64], list[NDArray[Any]]]:
+        """Frame ``row`` of ``stream``: its meta row and its arrays ``names``, checked against
+        the CRC; CorruptFrameError if they cannot be read or do not match."""
+        table = self._depth if stream == "depth" else self._thermal
+        table.check(row, f"{stream} frame {row}: meta row")
+        meta = table.rows[row]
         try:
-            depth = np.asarray(self._arrays["depth/image"][row])
-            ir = np.asarray(self._arrays["depth/ir"][row]) if self.with_ir else None
+            arrays = [np.asarray(self._arrays[f"{stream}/{n}"][row]) for n in names]
         except Exception as exc:
             raise CorruptFrameError(
-                f"depth frame {row}: unreadable chunk ({_short(exc)})"
+                f"{stream} frame {row}: unreadable chunk ({_short(exc)})"
             ) from None
-        if checksum(depth, ir) != int(meta[2]):
-            raise CorruptFrameError(f"depth frame {row}: pixels do not match their CRC-32")
-        return DepthFrame(depth, float(meta[0]), int(meta[1]), ir)
+        if checksum(*arrays) != int(meta[2]):
+            raise CorruptFrameError(f"{stream} frame {row}: pixels do not match their CRC-32")
+        return meta, arrays
+
+    def depth_frame(self, row: int) -> DepthFrame:
+        """The depth frame at ``row``; CorruptFrameError if it cannot be read or fails its CRC."""
+        meta, arrays = self._read("depth", row, ("image", "ir") if self.with_ir else ("image",))
+        ir = arrays[1] if self.with_ir else None
+        return DepthFrame(arrays[0], float(meta[0]), int(meta[1]), ir)
 
     def thermal_frame(self, row: int) -> ThermalFrame:
         """The thermal frame at ``row`` with its telemetry; CorruptFrameError as depth_frame."""
-        self._thermal.check(row, f"thermal frame {row}: meta row")
-        meta = self._thermal.rows[row]
-        try:
-            counts = np.asarray(self._arrays["thermal/image"][row])
-        except Exception as exc:
-            raise CorruptFrameError(
-                f"thermal frame {row}: unreadable chunk ({_short(exc)})"
-            ) from None
-        if checksum(counts) != int(meta[2]):
-            raise CorruptFrameError(f"thermal frame {row}: pixels do not match their CRC-32")
+        meta, (counts,) = self._read("thermal", row, ("image",))
         return ThermalFrame(counts, float(meta[0]), int(meta[1]), telemetry_from_row(meta[3:]))
 
     def _readable(self, rows: Iterable[Any], what: str, read: Callable[..., Any]) -> Iterator[Any]:
