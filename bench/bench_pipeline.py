@@ -14,7 +14,7 @@ import numpy as np
 from thermodepth.compensation import RadianceModel, save_model
 from thermodepth.evaluation import training_sweep
 from thermodepth.measure import find_hotspots
-from thermodepth.pipeline import HotspotSettings, Pipeline, Settings
+from thermodepth.pipeline import HotspotSettings, Pipeline, RoiSettings, Settings
 from thermodepth.sim import Rig, camera_pose, plate_scene
 
 from .common import counting, measure, report
@@ -27,6 +27,11 @@ def main() -> None:
         settings = Settings(compensation=model, hotspots=HotspotSettings(threshold_c=50.0))
         rig = Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0), start_s=1.0)
         pipe = Pipeline(settings, rig.calibration)
+        rois = [
+            RoiSettings(name="panel", rect=(400, 200, 880, 520)),
+            RoiSettings(name="near", depth_range_m=(0.5, 1.5)),
+        ]
+        pipe_rois = Pipeline(settings.model_copy(update={"rois": rois}), rig.calibration)
     pairs = list(rig.frames(8))
     pair = pairs[0]
     reg = pipe.registration
@@ -64,12 +69,17 @@ def main() -> None:
             n=200,
         ),
         measure(
+            "whole fused frame with two ROIs (a rectangle, a depth range)",
+            counting(lambda i: pipe_rois.process(pairs[i % len(pairs)])),
+            n=200,
+        ),
+        measure(
             "memory floor: depth to metres (peer)",
             lambda: np.multiply(pair.depth, np.float32(0.001), out=out),
             n=200,
         ),
     ]
-    whole = next(t for t in timings if t.name.startswith("whole"))
+    whole = next(t for t in timings if t.name.startswith("whole fused frame (P"))
     report(
         "fused frame pipeline (1280x720 + 160x120)",
         timings,

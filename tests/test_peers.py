@@ -82,6 +82,32 @@ def test_reference_depth_to_thermal_matches_kernels(case: Case, depth: NDArray[n
     assert depth_to_thermal_agreement(ours.z_m, case.zbuffer, case.tie_thermal) >= 0.999
 
 
+def test_depth_to_thermal_range_is_that_of_the_kept_point(
+    case: Case, depth: NDArray[np.uint16]
+) -> None:
+    # The range beside each Z belongs to a depth point whose Z is the one kept: the float64
+    # range lies within those of the points tied with the kept Z (float32 rounding, 1e-5).
+    d = case.cal.depth
+    u, v = d.pixel_grid()
+    points = case.cal.thermal_from_depth.apply(
+        d.deproject(np.stack([u, v], axis=-1), depth * case.cal.depth_scale_m)
+    )
+    range_m = np.linalg.norm(points, axis=-1)
+    idx, ok = nearest_index(case.cal, case.projected[0], case.projected[1])
+    kept_z = case.zbuffer.ravel()[np.where(ok, idx, 0)]
+    tied = ok & (case.projected[2] <= kept_z * (1 + 1e-5))
+    lo = np.full(case.zbuffer.size, np.inf)
+    hi = np.full(case.zbuffer.size, -np.inf)
+    np.minimum.at(lo, idx[tied], range_m[tied])
+    np.maximum.at(hi, idx[tied], range_m[tied])
+    ours = case.registration.depth_to_thermal(depth).range_m.ravel().astype(np.float64)
+    keep = ~case.tie_thermal.ravel() & np.isfinite(case.zbuffer.ravel())
+    assert keep.sum() > 10_000
+    within = (ours >= lo * (1 - 1e-5)) & (ours <= hi * (1 + 1e-5))
+    assert within[keep].mean() >= 0.999
+    assert np.isnan(ours[np.isnan(case.zbuffer.ravel())]).all()
+
+
 def test_reference_thermal_to_depth_matches_kernels(case: Case, depth: NDArray[np.uint16]) -> None:
     # Same reason and same thermal pixel on >= 99.9 % of the depth pixels, leaving out those
     # within 1e-3 px of a thermal pixel border; the box hides part of the wall from the
