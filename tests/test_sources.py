@@ -29,42 +29,44 @@ from thermodepth.sources.realsense import RealSenseCamera
 TEL = Telemetry(frame_counter=0, fpa_temp_k=305.0, housing_temp_k=304.0)
 
 
-class FakeDepth:
-    """30 fps depth frames, optionally losing the device after ``lose_after`` frames."""
+class FakeCamera:
+    """``n`` frames from ``frame(i)``, optionally losing the device after ``lose_after``."""
 
-    name = "fake-depth"
+    name = "fake"
     live = True
 
     def __init__(self, n: int, lose_after: int | None = None) -> None:
         self.n, self.lose_after, self.closed = n, lose_after, False
 
-    def __iter__(self) -> Iterator[DepthFrame]:
+    def frame(self, i: int) -> DepthFrame | ThermalFrame:
+        raise NotImplementedError
+
+    def __iter__(self) -> Iterator[DepthFrame | ThermalFrame]:
         for i in range(self.n):
             if self.lose_after is not None and i == self.lose_after:
                 raise DeviceLostError(f"{self.name}: stopped delivering frames (unplugged?)")
-            yield DepthFrame(np.full((6, 8), i, np.uint16), 0.004 + i / 30, i)
+            yield self.frame(i)
 
     def close(self) -> None:
         self.closed = True
 
 
-class FakeThermal:
-    """8.7 fps thermal frames, optionally losing the device after ``lose_after`` frames."""
+class FakeDepth(FakeCamera):
+    """30 fps depth frames."""
+
+    name = "fake-depth"
+
+    def frame(self, i: int) -> DepthFrame:
+        return DepthFrame(np.full((6, 8), i, np.uint16), 0.004 + i / 30, i)
+
+
+class FakeThermal(FakeCamera):
+    """8.7 fps thermal frames."""
 
     name = "fake-lepton"
-    live = True
 
-    def __init__(self, n: int, lose_after: int | None = None) -> None:
-        self.n, self.lose_after, self.closed = n, lose_after, False
-
-    def __iter__(self) -> Iterator[ThermalFrame]:
-        for k in range(self.n):
-            if self.lose_after is not None and k == self.lose_after:
-                raise DeviceLostError(f"{self.name}: stopped delivering frames (unplugged?)")
-            yield ThermalFrame(np.full((3, 4), 8000 + k, np.uint16), k / 8.7, k, TEL)
-
-    def close(self) -> None:
-        self.closed = True
+    def frame(self, i: int) -> ThermalFrame:
+        return ThermalFrame(np.full((3, 4), 8000 + i, np.uint16), i / 8.7, i, TEL)
 
 
 class FakeCapture:
