@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from collections.abc import Callable
+
 import pytest
 
 from thermodepth.evaluation import Generalisation, compensation_generalisation
@@ -11,3 +15,22 @@ from thermodepth.evaluation import Generalisation, compensation_generalisation
 def generalisation() -> Generalisation:
     """Both compensation methods fitted on a simulated sweep, with the held-out sweeps."""
     return compensation_generalisation(samples=200, seed=1)
+
+
+CliProcess = Callable[..., "subprocess.CompletedProcess[str]"]
+
+
+@pytest.fixture
+def cli_process() -> CliProcess:
+    """Runs ``thermodepth`` with the given arguments in a real process (so that the console
+    script's own error path is what is checked); returns it finished, output captured."""
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "thermodepth.cli", *args],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+
+    return run

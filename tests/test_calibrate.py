@@ -6,8 +6,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -16,6 +14,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
+from conftest import CliProcess
 from thermodepth.calibrate import (
     CalibrationResult,
     canonical_order,
@@ -573,24 +572,9 @@ def test_cli_drop_outliers_and_fixed_depth_intrinsics(tmp_path: Path) -> None:
 
 
 @needs_real
-def test_cli_error_is_one_line_with_exit_code_2(tmp_path: Path) -> None:
+def test_cli_error_is_one_line_with_exit_code_2(tmp_path: Path, cli_process: CliProcess) -> None:
     d = copy_real(tmp_path / "pairs", REAL_KEYS[:4])
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "thermodepth.cli",
-            "calibrate",
-            str(d),
-            "--square-m",
-            "0.025",
-            "-o",
-            str(tmp_path / "c.yaml"),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    proc = cli_process("calibrate", str(d), "--square-m", "0.025", "-o", str(tmp_path / "c.yaml"))
     assert proc.returncode == 2
     err = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
     assert err == ["error: only 4 usable pairs of 4 (need at least 6): capture more poses"]

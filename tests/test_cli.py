@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
+from conftest import CliProcess
 from thermodepth import __version__
 from thermodepth.cli import app, counts_to_celsius
 from thermodepth.errors import InputError, ThermodepthError
@@ -33,16 +32,12 @@ def test_check_calibration_json_summary() -> None:
     assert summary["thermal_hfov_deg"] == pytest.approx(55.99, abs=0.01)
 
 
-def test_bad_calibration_is_one_line_without_traceback(tmp_path: Path) -> None:
+def test_bad_calibration_is_one_line_without_traceback(
+    tmp_path: Path, cli_process: CliProcess
+) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text(EXAMPLE.read_text().replace("fx: 150.5", "fx: -150.5"))
-    # a real process, so that the console script's own error path is what is checked
-    proc = subprocess.run(
-        [sys.executable, "-m", "thermodepth.cli", "check-calibration", str(bad)],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    proc = cli_process("check-calibration", str(bad))
     assert proc.returncode == 2
     assert proc.stdout == ""
     lines = proc.stderr.strip().splitlines()
@@ -233,23 +228,11 @@ def test_record_prints_and_stores_the_source_counters(tmp_path: Path) -> None:
     assert Recording(b).attrs["source_counters"] == {"replay_skipped": 0}
 
 
-def test_missing_lepton_is_one_line_without_opencv_warnings(tmp_path: Path) -> None:
+def test_missing_lepton_is_one_line_without_opencv_warnings(
+    tmp_path: Path, cli_process: CliProcess
+) -> None:
     if Path("/dev/video57").exists():
         pytest.skip("/dev/video57 exists")
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "thermodepth.cli",
-            "record",
-            "-s",
-            "lepton:57",
-            "-o",
-            str(tmp_path / "l.zarr"),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    proc = cli_process("record", "-s", "lepton:57", "-o", str(tmp_path / "l.zarr"))
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == ["error: /dev/video57: cannot open (no such device)"]
