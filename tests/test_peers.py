@@ -32,7 +32,7 @@ from bench.peers import (
 from numpy.typing import NDArray
 
 from thermodepth.calibration import Calibration
-from thermodepth.camera import RigidTransform, rotation_from_euler
+from thermodepth.camera import Intrinsics, RigidTransform, rotation_from_euler
 from thermodepth.registration import Reason, Registration
 from thermodepth.sim import Rig, default_calibration, occlusion_scene
 
@@ -127,6 +127,27 @@ def test_reference_thermal_to_depth_matches_kernels(case: Case, depth: NDArray[n
     )
     np.testing.assert_array_equal(given.reason, ours.reason)
     np.testing.assert_array_equal(given.values, ours.values)
+
+
+def test_every_depth_pixel_counts_to_the_last_of_its_row() -> None:
+    # A narrow depth camera of odd width (203 = 8 * 25 + 3: the strided scatter's classes end
+    # unevenly) inside a wide thermal view: each row's span is the whole row, and every
+    # pixel, the last ones included, must reach the z-buffer. Random depths, so the nearest
+    # of the ~2 depth pixels per thermal pixel is anyone's.
+    base = default_calibration()
+    narrow = Intrinsics(203, 101, 320.0, 320.0, 101.0, 50.0)
+    cal = Calibration(narrow, base.thermal, base.depth_scale_m, base.thermal_from_depth)
+    depth = np.random.default_rng(7).integers(1500, 3000, narrow.shape, dtype=np.uint16)
+    projected = numpy_reference(cal, depth)
+    assert np.isfinite(projected[0]).all()  # every depth pixel lands in the thermal image
+    tie, tie_thermal = border_exclusions(cal, projected, eps_px=1e-3)
+    reg = Registration(cal)
+    zbuf = reference_depth_to_thermal(cal, depth, projected)
+    assert depth_to_thermal_agreement(reg.depth_to_thermal(depth).z_m, zbuf, tie_thermal) == 1.0
+    thermal = thermal_index_image(cal)
+    want = reference_thermal_to_depth(cal, depth, thermal, registration_tolerance(cal), projected)
+    got = reg.thermal_to_depth(depth, thermal)
+    assert thermal_to_depth_agreement(*got, *want, tie) == 1.0
 
 
 def test_reference_occlusion_tolerance_is_passed_in(case: Case, depth: NDArray[np.uint16]) -> None:

@@ -179,6 +179,7 @@ def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
 # one branch-free min per pixel updates both (a compare-and-branch on noisy Z mispredicts:
 # measured 1.7x slower). The empty key decodes to Z = inf, range = NaN.
 _EMPTY_KEY = np.uint64(0x7F800000_7FC00000)
+_SCATTER_STRIDE = 8  # depth pixels: more than one thermal pixel spans (~4 on the D435 + Lepton)
 
 
 @numba.njit(parallel=True, **_JIT)
@@ -202,16 +203,23 @@ def _zbuffer(depth, scale, a0, a1, a2, brow, geo, lo, hi, keys):  # pragma: no c
             # loops over views that start at 0: a non-zero range start would make numba
             # check every index for wraparound, which stops vectorisation (4x slower)
             dr, c0, c1, c2 = drow[u0:u1], ar0[u0:u1], ar1[u0:u1], ar2[u0:u1]
-            for u in range(dr.size):
+            n = dr.size
+            for u in range(n):
                 _, _, px, py, pz, i = _project(dr[u], scale, c0[u], c1[u], c2[u], b0, b1, b2, geo)
                 zt[u] = pz
                 rt[u] = np.sqrt(px * px + py * py + pz * pz)
                 idx[u] = i
-            for u in range(dr.size):
-                i = idx[u]
-                if i >= 0:
-                    key = (np.uint64(zbits[u]) << np.uint64(32)) | np.uint64(rbits[u])
-                    kloc[i] = min(kloc[i], key)
+            # neighbouring depth pixels share a thermal pixel: in order, each min would wait
+            # for the store of the one before (store-to-load forwarding). _SCATTER_STRIDE
+            # apart they land in different thermal pixels and the updates overlap (measured
+            # 1.17x faster on one thread, 1.1x on two).
+            for s in range(_SCATTER_STRIDE):
+                for m in range((n - s + _SCATTER_STRIDE - 1) // _SCATTER_STRIDE):
+                    u = m * _SCATTER_STRIDE + s
+                    i = idx[u]
+                    if i >= 0:
+                        key = (np.uint64(zbits[u]) << np.uint64(32)) | np.uint64(rbits[u])
+                        kloc[i] = min(kloc[i], key)
     for i in range(keys.shape[1]):  # serial: 19,200 compares cost less than waking threads
         for k in range(1, n_chunks):
             keys[0, i] = min(keys[0, i], keys[k, i])
