@@ -143,8 +143,8 @@ def test_rotation_within_tolerance_is_accepted() -> None:
     [
         ("empty.yaml", "", "expected a mapping"),
         ("list.yaml", "- 1\n- 2\n", "expected a mapping"),
-        ("broken.yaml", "depth: {width: 1280\n", "not valid yaml"),
-        ("broken.json", '{"depth": ', "not valid json"),
+        ("broken.yaml", "depth: {width: 1280\n", "not valid YAML"),
+        ("broken.json", '{"depth": ', "not valid JSON"),
     ],
 )
 def test_malformed_files(tmp_path: Path, name: str, content: str, message: str) -> None:

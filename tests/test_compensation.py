@@ -226,9 +226,10 @@ def test_flag_names() -> None:
 # -- save / load ------------------------------------------------------------------------------
 
 
-def test_save_load_round_trip(tmp_path: Path, generalisation) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize("suffix", [".json", ".yaml"])
+def test_save_load_round_trip(tmp_path: Path, generalisation, suffix: str) -> None:  # type: ignore[no-untyped-def]
     for model in generalisation.models.values():
-        path = tmp_path / f"{model.method}.json"
+        path = tmp_path / f"{model.method}{suffix}"
         save_model(model, path)
         back = load_model(path)
         assert back == model

@@ -214,19 +214,38 @@ def read_mapping(path: str | Path) -> Any:
         data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
         first = str(exc).strip().splitlines()[0]
-        raise InputError(f"{p}: not valid {p.suffix.lstrip('.') or 'YAML'}: {first}") from None
+        kind = "JSON" if p.suffix.lower() == ".json" else "YAML"
+        raise InputError(f"{p}: not valid {kind}: {first}") from None
     if not isinstance(data, dict):
         raise InputError(f"{p}: expected a mapping of keys at the top level")
     return data
 
 
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays, and tuples, as the Python numbers and lists they hold."""
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return list(value)
+    raise TypeError(f"cannot write a {type(value).__name__}")
+
+
+class _Dumper(yaml.SafeDumper):
+    """YAML's safe dumper, writing numpy values and tuples as plain numbers and lists."""
+
+
+for _kind in (np.ndarray, np.generic, tuple):
+    _Dumper.add_multi_representer(_kind, lambda dumper, v: dumper.represent_data(_plain(v)))
+
+
 def write_mapping(path: str | Path, data: dict[str, Any]) -> None:
+    """Write a mapping as JSON (a name ending in .json) or YAML; numpy values become plain."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     if p.suffix.lower() == ".json":
-        p.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+        p.write_text(json.dumps(data, indent=2, default=_plain) + "\n", encoding="utf-8")
     else:
-        p.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+        p.write_text(yaml.dump(data, Dumper=_Dumper, sort_keys=False), encoding="utf-8")
 
 
 @dataclass(frozen=True)

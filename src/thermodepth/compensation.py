@@ -23,7 +23,6 @@ the distance; both are fitted on a sweep (``thermodepth.sweep``) and saved as ve
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntFlag
@@ -34,7 +33,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import Field, ValidationError
 
-from .calibration import PlanckSchema, StrictSchema, describe_validation_error
+from .calibration import (
+    PlanckSchema,
+    StrictSchema,
+    describe_validation_error,
+    read_mapping,
+    write_mapping,
+)
 from .errors import InputError
 from .radiometry import (
     PAPER_2022,
@@ -668,28 +673,22 @@ _LOADERS: dict[str, Callable[[dict[str, Any]], CompensationModel]] = {
 
 
 def save_model(model: CompensationModel, path: str | Path) -> None:
-    """Write a model as versioned JSON."""
+    """Write a model as a versioned mapping: JSON, or YAML when the name ends otherwise."""
     doc = {
         "schema": SCHEMA,
         "version": SCHEMA_VERSION,
         "method": model.method,
         "model": model.to_dict(),
     }
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    write_mapping(path, doc)
 
 
 def load_model(path: str | Path) -> CompensationModel:
-    """Read and validate a model file; a bad file raises one InputError line naming it."""
+    """Read and validate a model file (JSON or YAML); a bad file raises one InputError line
+    naming it."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{p}: not valid JSON: {exc.msg} (line {exc.lineno})") from None
-    if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
+    doc = read_mapping(p)
+    if doc.get("schema") != SCHEMA:
         raise InputError(f"{p}: not a thermodepth compensation model (schema != {SCHEMA!r})")
     if doc.get("version") != SCHEMA_VERSION:
         raise InputError(
