@@ -926,7 +926,7 @@ def _check_sizes(sizes: dict[Path, tuple[int, int]], camera: str) -> tuple[int, 
 
 
 def run_calibration(
-    pairs_dir: str | Path,
+    pairs: str | Path | PairListing,
     board: BoardSpec,
     depth_intrinsics: Intrinsics | None = None,
     depth_scale_m: float = 0.001,
@@ -939,7 +939,8 @@ def run_calibration(
     depth_refine: str = "cornersubpix",
     progress: Progress | None = None,
 ) -> CalibrationResult:
-    """Calibrate the pair from the image pairs in ``pairs_dir``.
+    """Calibrate the pair from the image pairs of a folder (or what :func:`discover_pairs`
+    found in one).
 
     board: the target (square size in metres: translation comes out in metres);
     depth_intrinsics: hold the depth camera's intrinsics fixed (else calibrated from its
@@ -962,7 +963,7 @@ def run_calibration(
             raise InputError(
                 f"--{name}-model: unknown {model!r}; choose from {', '.join(DISTORTION_MODELS)}"
             )
-    listing = discover_pairs(pairs_dir)
+    listing = pairs if isinstance(pairs, PairListing) else discover_pairs(pairs)
     skipped: list[SkippedPair] = []
     # first read every image (cheap), so that a change of image size stops the run before
     # the slow detection

@@ -877,10 +877,10 @@ def calibrate_cmd(
         if not (math.isfinite(depth_scale_m) and depth_scale_m > 0):
             raise InputError(f"--depth-scale-m: must be a finite number > 0, got {depth_scale_m}")
         scale = depth_scale_m
-    n_pairs = len(discover_pairs(pairs_dir).pairs)
-    with progress_bar("detecting boards", n_pairs) as advance:
+    listing = discover_pairs(pairs_dir)
+    with progress_bar("detecting boards", len(listing.pairs)) as advance:
         result = run_calibration(
-            pairs_dir,
+            listing,
             spec,
             depth_intrinsics=fixed,
             depth_scale_m=0.001 if scale is None else scale,
