@@ -22,6 +22,7 @@ from thermodepth.calibrate import (
     detect_board,
     discover_pairs,
     flag_outliers,
+    grid_continues,
     load_depth_intrinsics,
     load_image,
     match_order,
@@ -312,6 +313,56 @@ def test_fewer_than_six_usable_pairs_stop_with_how_many_and_why(tmp_path: Path) 
     assert "only 5 usable pairs of 7 (need at least 6)" in msg
     assert "1 without a board in one or both images (04)" in msg
     assert "1 with an unreadable image (06)" in msg
+
+
+@needs_real
+def test_a_board_of_the_wrong_size_is_named_as_the_likely_cause(tmp_path: Path) -> None:
+    # OpenCV finds an 8x6 sub-grid on most views of the 9x6 board, a different one in the
+    # two cameras; those pairs are skipped, and the message points at --board
+    d = copy_real(tmp_path / "pairs", REAL_KEYS[:6])
+    with pytest.raises(InputError) as exc:
+        run_calibration(d, BoardSpec.parse("checkerboard:8x6", 1.0))
+    msg = str(exc.value)
+    assert "usable pairs of 6 (need at least 6)" in msg and "\n" not in msg
+    assert "where the board has more corners" in msg
+    assert "check --board: checkerboard:8x6 counts inner corners, columns x rows" in msg
+
+
+@needs_real
+def test_grid_continues_past_sub_grids_only() -> None:
+    # the right size: no edge on any of OpenCV's 26 views; one column or row too few: the
+    # pattern goes on past an edge in most views where OpenCV finds the sub-grid
+    paths = sorted(REAL.glob("*.jpg"))
+    assert len(paths) == 26
+    flagged, seen = 0, 0
+    for path in paths:
+        img = load_image(path)
+        right = detect_board(img, BOARD_REAL)
+        assert right is not None and grid_continues(img, right.points_px, BOARD_REAL) == ()
+        for smaller in ("checkerboard:8x6", "checkerboard:9x5"):
+            board = BoardSpec.parse(smaller, 1.0)
+            det = detect_board(img, board)
+            if det is not None:
+                seen += 1
+                flagged += bool(grid_continues(img, det.points_px, board))
+    assert seen >= 20 and flagged / seen >= 0.8
+
+
+def test_grid_continues_on_simulated_lepton_views(sim_dir: Path) -> None:
+    n = 0
+    for path in sorted(sim_dir.glob("*_thermal.png")):
+        img = load_image(path)
+        det = detect_board(img, BOARD_SIM)
+        if det is not None:  # a few of the 25 poses are too oblique for the Lepton
+            n += 1
+            assert grid_continues(img, det.points_px, BOARD_SIM) == (), path.name
+    assert n >= 20
+    small = BoardSpec.parse("checkerboard:7x5", 0.03)
+    views = [load_image(p) for p in sorted(sim_dir.glob("*_thermal.png"))[:8]]
+    dets = [(img, detect_board(img, small)) for img in views]
+    found = [(img, det) for img, det in dets if det is not None]
+    assert len(found) >= 4
+    assert all(len(grid_continues(img, det.points_px, small)) >= 2 for img, det in found)
 
 
 @needs_real

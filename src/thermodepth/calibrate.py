@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import ValidationError
+from scipy.ndimage import map_coordinates
 
 from .calibration import (
     BoardSpec,
@@ -437,6 +438,73 @@ def refine_corners_homography(
             new[k] = q[:2] / q[2]
         pts = new
     return pts
+
+
+# Past the last inner corner of a checkerboard lie its outer squares on one side and the
+# margin on the other: half a corner's contrast. A grid of more corners than the detector was
+# told goes on with a full one there (OpenCV finds such sub-grids and would pair different
+# corners in the two cameras).
+CONTINUES_FRACTION = 0.7
+"""Contrast past an edge, as a fraction of the inner corners', above which the pattern is
+taken to go on (theory: 0.5 at a true edge, 1.0 where it goes on; measured: the highest edge
+of a view 0.47-0.57 at the right size, mostly 0.66-1.15 for a sub-grid, on OpenCV's samples
+and simulated IR + Lepton views; docs/calibration.md)."""
+
+
+def grid_continues(image: NDArray[Any], points_px: FloatArray, board: BoardSpec) -> tuple[str, ...]:
+    """The edges (``"left"``, ``"right"``, ``"top"``, ``"bottom"`` of the grid as detected)
+    past which a checkerboard's corner pattern goes on: the board has more corners than
+    ``board`` says.
+
+    image: (H, W), any dtype (the score is invariant to an affine map of intensity);
+    points_px: (rows * cols, 2) detected corners in grid order. A corner's contrast is the
+    difference of the mean intensities of its two diagonal pairs of quadrants (3 x 3 samples
+    each, 0.15-0.35 of a square from the corner along the local grid axes), signed by the
+    corner's parity. The points one step past each edge (extrapolated along the grid lines)
+    are scored the same, and their median is compared with the inner corners'
+    (:data:`CONTINUES_FRACTION`). Edges with fewer than two such points inside the image are
+    not judged.
+    """
+    img = np.asarray(image, dtype=np.float32)
+    h, w = img.shape
+    rows, cols = board.rows, board.cols
+    g = np.asarray(points_px, dtype=np.float64).reshape(rows, cols, 2)
+    # the grid grown by one extrapolated column on each side, and by one row on each side
+    wide = np.concatenate([2 * g[:, :1] - g[:, 1:2], g, 2 * g[:, -1:] - g[:, -2:-1]], axis=1)
+    tall = np.concatenate([2 * g[:1] - g[1:2], g, 2 * g[-1:] - g[-2:-1]], axis=0)
+    steps = np.array([0.15, 0.25, 0.35])
+    fx, fy = (a.ravel() for a in np.meshgrid(steps, steps))
+
+    def contrast(grid: FloatArray, first_col: int, first_row: int) -> tuple[FloatArray, ...]:
+        # signed corner contrast at every point of a grid, and how far its samples reach
+        ex = np.gradient(grid, axis=1)[..., None, :]
+        ey = np.gradient(grid, axis=0)[..., None, :]
+        means = []
+        for sx, sy in ((1, 1), (-1, -1), (1, -1), (-1, 1)):
+            q = grid[..., None, :] + (sx * fx)[:, None] * ex + (sy * fy)[:, None] * ey
+            means.append(map_coordinates(img, [q[..., 1], q[..., 0]], order=1).mean(axis=-1))
+        r, c = np.indices(grid.shape[:2])
+        parity = np.where((r + first_row + c + first_col) % 2 == 0, 1.0, -1.0)
+        reach = 0.35 * (np.abs(ex) + np.abs(ey)).max(axis=(-2, -1))
+        return (means[0] + means[1] - means[2] - means[3]) * parity, reach
+
+    inner = float(np.median(contrast(g, 0, 0)[0]))
+    if not np.isfinite(inner) or inner == 0:
+        return ()
+    wide_c, wide_reach = contrast(wide, -1, 0)
+    tall_c, tall_reach = contrast(tall, 0, -1)
+    found = []
+    for name, grid, score, reach, pick in (
+        ("left", wide, wide_c, wide_reach, np.s_[:, 0]),
+        ("right", wide, wide_c, wide_reach, np.s_[:, -1]),
+        ("top", tall, tall_c, tall_reach, np.s_[0, :]),
+        ("bottom", tall, tall_c, tall_reach, np.s_[-1, :]),
+    ):
+        p, m = grid[pick], reach[pick] + 1
+        inside = (p[:, 0] >= m) & (p[:, 0] <= w - 1 - m) & (p[:, 1] >= m) & (p[:, 1] <= h - 1 - m)
+        if inside.sum() >= 2 and np.median(score[pick][inside]) / inner > CONTINUES_FRACTION:
+            found.append(name)
+    return tuple(found)
 
 
 def _find_circles(img8: NDArray[np.uint8], board: BoardSpec) -> tuple[FloatArray, bool, str] | None:
@@ -1008,6 +1076,17 @@ def run_calibration(
             )
             names = " and ".join(p.name for p in missing)
             skipped.append(SkippedPair(pair, f"no {board} found in {names}", missing))
+        elif larger := _larger_boards(
+            board, (pair.depth_path, depth_img, d), (pair.thermal_path, thermal_img, t)
+        ):
+            names = " and ".join(f"{p.name} ({', '.join(edges)})" for p, edges in larger)
+            skipped.append(
+                SkippedPair(
+                    pair,
+                    f"{CONTINUES_REASON} of the {board} found in {names}",
+                    tuple(p for p, _ in larger),
+                )
+            )
         else:
             t = Detection(
                 match_order(d.points_px, t.points_px, board), t.inverted, t.upscale, t.method
@@ -1018,7 +1097,7 @@ def run_calibration(
     skipped.sort(key=lambda sp: listing.pairs.index(sp.pair))
     if len(found) < min_pairs:
         raise InputError(
-            _too_few_message(len(found), len(listing.pairs), min_pairs, skipped, listing)
+            _too_few_message(len(found), len(listing.pairs), min_pairs, skipped, listing, board)
         )
 
     def fit(
@@ -1069,14 +1148,39 @@ def run_calibration(
     )
 
 
+CONTINUES_REASON = "the pattern goes on past the edge"
+
+
+def _larger_boards(
+    board: BoardSpec, *views: tuple[Path, NDArray[Any], Detection]
+) -> list[tuple[Path, tuple[str, ...]]]:
+    """The images of a pair whose checkerboard goes on past the corners found, and where."""
+    if board.kind != "checkerboard":
+        return []
+    found = [(path, grid_continues(img, det.points_px, board)) for path, img, det in views]
+    return [(path, edges) for path, edges in found if edges]
+
+
 def _too_few_message(
-    n_found: int, n_pairs: int, need: int, skipped: list[SkippedPair], listing: PairListing
+    n_found: int,
+    n_pairs: int,
+    need: int,
+    skipped: list[SkippedPair],
+    listing: PairListing,
+    board: BoardSpec,
 ) -> str:
     unreadable = [s.pair.name for s in skipped if "unreadable" in s.reason or "2-D" in s.reason]
-    no_board = [s.pair.name for s in skipped if s.pair.name not in unreadable]
+    larger = [s.pair.name for s in skipped if s.reason.startswith(CONTINUES_REASON)]
+    no_board = [s.pair.name for s in skipped if s.pair.name not in unreadable + larger]
     parts = []
     if no_board:
         parts.append(f"{len(no_board)} without a board in one or both images ({_names(no_board)})")
+    if larger:
+        parts.append(f"{len(larger)} where the board has more corners ({_names(larger)})")
+    if larger or (n_found == 0 and len(no_board) >= 2):
+        # a wrong size is more likely than bad captures
+        counts = "inner corners" if board.kind == "checkerboard" else "circles"
+        parts.append(f"check --board: {board} counts {counts}, columns x rows")
     if unreadable:
         parts.append(f"{len(unreadable)} with an unreadable image ({_names(unreadable)})")
     if listing.unmatched:
