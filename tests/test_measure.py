@@ -13,6 +13,7 @@ from thermodepth.measure import (
     PolygonRoi,
     RectRoi,
     RoiStats,
+    bounding_box,
     find_hotspots,
     roi_stats,
     spot_at_point,
@@ -40,6 +41,21 @@ def test_roi_masks_and_stats() -> None:
     assert s.n == 7 and s.max_c == 85.0 and s.min_c == 63.0 and s.flags == 2
     empty = roi_stats("e", temp, np.zeros(shape, bool))
     assert empty.n == 0 and np.isnan(empty.mean_c)
+
+
+def test_bounding_box_holds_every_pixel_of_the_mask() -> None:
+    shape = (10, 20)
+    assert bounding_box(RectRoi("r", 2, 3, 6, 5).mask(shape)) == (slice(3, 5), slice(2, 6))
+    poly = PolygonRoi("p", ((4, 1), (12, 6), (5, 8))).mask(shape)
+    box = bounding_box(poly)
+    assert poly[box].sum() == poly.sum()
+    assert poly[box][0].any() and poly[box][-1].any()  # tight on all four sides
+    assert poly[box][:, 0].any() and poly[box][:, -1].any()
+    one = np.zeros(shape, bool)
+    one[9, 19] = True
+    assert bounding_box(one) == (slice(9, 10), slice(19, 20))
+    none = bounding_box(np.zeros(shape, bool))
+    assert np.zeros(shape)[none].size == 0
 
 
 def _square(temp: float, size: int, bg: float = 25.0, at: tuple[int, int] = (60, 40)) -> np.ndarray:

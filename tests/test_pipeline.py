@@ -20,7 +20,7 @@ from thermodepth.evaluation import Generalisation
 from thermodepth.figures import plot_overlay
 from thermodepth.frames import FramePair
 from thermodepth.io.pointcloud import read_ply, write_ply
-from thermodepth.measure import hotspot_box_on_depth
+from thermodepth.measure import hotspot_box_on_depth, roi_stats
 from thermodepth.pipeline import (
     HotspotSettings,
     Pipeline,
@@ -169,6 +169,27 @@ def test_vox_outside_the_model_is_flagged_on_measurements(model_path: Path) -> N
     assert frame.hotspots and all(h.flags & Flag.VOX_OUTSIDE for h in frame.hotspots)
     assert frame.rois[0].flags & Flag.VOX_OUTSIDE
     assert frame.rois[1].n == 0 and frame.rois[1].flags == 0
+
+
+def test_roi_statistics_are_those_of_the_whole_mask() -> None:
+    # fixed ROIs gather from their bounding box: the same pixels as the full-image mask
+    rig = inspection_rig(1.0)
+    rois = [
+        RoiSettings(name="rect", rect=(500, 250, 780, 470)),
+        RoiSettings(name="poly", polygon=[(520, 260), (760, 300), (600, 460)]),
+        RoiSettings(name="range", depth_range_m=(0.5, 1.5)),
+    ]
+    pipe = Pipeline(Settings(rois=rois), rig.calibration)
+    frame = pipe.process(rig.frame())
+    shape = rig.calibration.depth.shape
+    flags, index = frame.flags_thermal.ravel(), frame.thermal_index_depth
+    assert index is not None
+    for got, roi in zip(frame.rois, pipe.rois, strict=True):
+        mask = roi.mask(shape, frame.depth_m)
+        seen = index[mask]
+        want = roi_stats(roi.name, frame.temp_depth_c, mask, flags[seen[seen >= 0]])
+        assert got.n > 1000
+        assert got == want
 
 
 def test_shutter_frame_and_bad_counts_keep_the_stream_going() -> None:

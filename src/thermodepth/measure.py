@@ -81,6 +81,18 @@ class DepthRangeRoi:
 
 
 Roi = RectRoi | PolygonRoi | DepthRangeRoi
+Box = tuple[slice, slice]
+"""Rows and columns of an image, as slices."""
+
+
+def bounding_box(mask: BoolArray) -> Box:
+    """The smallest (rows, columns) slices that hold every True of a 2-D ``mask`` (empty
+    slices when it has none): a fixed ROI's statistics then gather from its box only."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return slice(0, 0), slice(0, 0)
+    return slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1)
 
 
 @dataclass(frozen=True)

@@ -42,12 +42,14 @@ from .frames import FramePair
 from .measure import (
     AlarmRule,
     AlarmTracker,
+    Box,
     DepthRangeRoi,
     Hotspot,
     PolygonRoi,
     RectRoi,
     Roi,
     RoiStats,
+    bounding_box,
     find_hotspots,
     roi_stats,
 )
@@ -317,11 +319,16 @@ class Pipeline:
             ),
         )
         self.rois = [roi.roi() for roi in s.rois]
-        # fixed shapes on the depth grid: their masks once (depth ranges change each frame)
-        self._roi_masks = [
-            None if isinstance(roi, DepthRangeRoi) else roi.mask(calibration.depth.shape)
-            for roi in self.rois
-        ]
+        # fixed shapes on the depth grid: their boxes and masks once, so that each frame
+        # gathers from the box only (depth ranges change each frame)
+        self._roi_regions: list[tuple[Box, NDArray[np.bool_]] | None] = []
+        for roi in self.rois:
+            if isinstance(roi, DepthRangeRoi):
+                self._roi_regions.append(None)
+                continue
+            mask = roi.mask(calibration.depth.shape)
+            box = bounding_box(mask)
+            self._roi_regions.append((box, mask[box]))
         self.alarms = AlarmTracker(
             [AlarmRule(a.name, a.above_c, a.for_frames, a.what) for a in s.alarms]
         )
@@ -431,11 +438,11 @@ class Pipeline:
         )
         frame.rois = []
         flags, index = frame.flags_thermal.ravel(), frame.thermal_index_depth
-        for roi, mask in zip(self.rois, self._roi_masks, strict=True):
-            if mask is None:
-                mask = roi.mask(cal.depth.shape, frame.depth_m)
-            seen = index[mask] if index is not None else np.empty(0, np.int32)
-            stats = roi_stats(roi.name, frame.temp_depth_c, mask, flags[seen[seen >= 0]])
+        whole = (slice(None), slice(None))
+        for roi, region in zip(self.rois, self._roi_regions, strict=True):
+            box, mask = region or (whole, roi.mask(cal.depth.shape, frame.depth_m))
+            seen = index[box][mask] if index is not None else np.empty(0, np.int32)
+            stats = roi_stats(roi.name, frame.temp_depth_c[box], mask, flags[seen[seen >= 0]])
             frame.rois.append(stats)
         frame.events = self.alarms.update(
             frame.thermal_time_s, frame.index, frame.hotspots, frame.rois
