@@ -32,7 +32,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -807,11 +807,16 @@ def coverage_grid(
 # -- the whole run ----------------------------------------------------------------------------
 
 
+SkipKind = Literal["unreadable", "no board", "larger board"]
+
+
 @dataclass(frozen=True)
 class SkippedPair:
-    """A pair left out, why, and which file is to blame (None for both)."""
+    """A pair left out: of which kind (``"unreadable"``, ``"no board"``, ``"larger board"``:
+    a board with more corners than asked for), why in words, and which files are to blame."""
 
     pair: ImagePair
+    kind: SkipKind
     reason: str
     files: tuple[Path, ...]
 
@@ -1044,7 +1049,7 @@ def run_calibration(
             try:
                 images.append(load_image(path))
             except InputError as exc:
-                skipped.append(SkippedPair(pair, str(exc), (path,)))
+                skipped.append(SkippedPair(pair, "unreadable", str(exc), (path,)))
                 break
         else:
             depth_sizes[pair.depth_path] = _image_size(images[0])
@@ -1075,7 +1080,7 @@ def run_calibration(
                 p for p, det in ((pair.depth_path, d), (pair.thermal_path, t)) if det is None
             )
             names = " and ".join(p.name for p in missing)
-            skipped.append(SkippedPair(pair, f"no {board} found in {names}", missing))
+            skipped.append(SkippedPair(pair, "no board", f"no {board} found in {names}", missing))
         elif larger := _larger_boards(
             board, (pair.depth_path, depth_img, d), (pair.thermal_path, thermal_img, t)
         ):
@@ -1083,7 +1088,8 @@ def run_calibration(
             skipped.append(
                 SkippedPair(
                     pair,
-                    f"{CONTINUES_REASON} of the {board} found in {names}",
+                    "larger board",
+                    f"the pattern goes on past the edge of the {board} found in {names}",
                     tuple(p for p, _ in larger),
                 )
             )
@@ -1148,9 +1154,6 @@ def run_calibration(
     )
 
 
-CONTINUES_REASON = "the pattern goes on past the edge"
-
-
 def _larger_boards(
     board: BoardSpec, *views: tuple[Path, NDArray[Any], Detection]
 ) -> list[tuple[Path, tuple[str, ...]]]:
@@ -1169,9 +1172,10 @@ def _too_few_message(
     listing: PairListing,
     board: BoardSpec,
 ) -> str:
-    unreadable = [s.pair.name for s in skipped if "unreadable" in s.reason or "2-D" in s.reason]
-    larger = [s.pair.name for s in skipped if s.reason.startswith(CONTINUES_REASON)]
-    no_board = [s.pair.name for s in skipped if s.pair.name not in unreadable + larger]
+    unreadable, no_board, larger = (
+        [s.pair.name for s in skipped if s.kind == kind]
+        for kind in ("unreadable", "no board", "larger board")
+    )
     parts = []
     if no_board:
         parts.append(f"{len(no_board)} without a board in one or both images ({_names(no_board)})")
