@@ -210,12 +210,12 @@ def read_mapping(path: str | Path) -> Any:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    is_json = p.suffix.lower() == ".json"
     try:
-        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+        data = json.loads(text) if is_json else yaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
         first = str(exc).strip().splitlines()[0]
-        kind = "JSON" if p.suffix.lower() == ".json" else "YAML"
-        raise InputError(f"{p}: not valid {kind}: {first}") from None
+        raise InputError(f"{p}: not valid {'JSON' if is_json else 'YAML'}: {first}") from None
     if not isinstance(data, dict):
         raise InputError(f"{p}: expected a mapping of keys at the top level")
     return data
