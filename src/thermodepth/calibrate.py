@@ -161,11 +161,12 @@ def discover_pairs(pairs_dir: str | Path) -> PairListing:
             continue
         ((role, path),) = slot.items()
         want = "thermal" if role == "depth" else "depth camera (IR/colour)"
-        hint = f"{stem}_thermal.*" if rule == "suffix" and role == "depth" else None
-        if rule == "suffix" and role == "thermal":
-            hint = f"{stem}_ir.* (or _color, _rgb)"
         if rule == "side":
             hint = f"{'right' if role == 'depth' else 'left'}{stem}.*"
+        elif role == "depth":
+            hint = f"{stem}_thermal.*"
+        else:
+            hint = f"{stem}_ir.* (or _color, _rgb)"
         unmatched.append((path, f"no {want} image to pair with (expected {hint})"))
     if not pairs:
         raise InputError(f"{folder}: no image pairs found (naming rules: {RULES_TEXT})")
