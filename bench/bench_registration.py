@@ -39,13 +39,13 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 from rich.markup import escape
 
-from thermodepth.calibration import Calibration
 from thermodepth.camera import RigidTransform
 from thermodepth.registration import Reason, Registration
 from thermodepth.sim import Rig, default_calibration, occlusion_scene
@@ -84,6 +84,7 @@ FLOOR = "memory floor"
 SLOW = (CV_D2T, REF_D2T, REF_T2D)
 
 Frame = tuple[NDArray[np.uint16], NDArray[np.uint16]]
+T = TypeVar("T")
 
 
 def interleaved(
@@ -101,10 +102,7 @@ def interleaved(
             dt = time.perf_counter() - t0
             if r >= warmup:
                 times[name].append(dt)
-    return [
-        Timing(name, float(np.median(t) * 1e3), float(np.percentile(t, 90) * 1e3), len(t))
-        for name, t in times.items()
-    ]
+    return [Timing.of(name, t) for name, t in times.items()]
 
 
 def back_to_back(contenders: dict[str, Callable[[int], object]]) -> list[Timing]:
@@ -116,10 +114,10 @@ def back_to_back(contenders: dict[str, Callable[[int], object]]) -> list[Timing]
     return timings
 
 
-def single_threaded(fn: Callable[[int], object]) -> Callable[[int], object]:
+def single_threaded(fn: Callable[[int], T]) -> Callable[[int], T]:
     """``fn`` run with numba's thread count set to 1 (restored after)."""
 
-    def run(i: int) -> object:
+    def run(i: int) -> T:
         n = numba.get_num_threads()
         numba.set_num_threads(1)
         try:
@@ -136,13 +134,10 @@ def _frames() -> list[Frame]:
 
 
 def _contenders(
-    cal: Calibration, frames: list[Frame], aligner: RsAlign | None, skipped: dict[str, str]
+    reg: Registration, frames: list[Frame], aligner: RsAlign | None, skipped: dict[str, str]
 ) -> dict[str, Callable[[int], object]]:
-    reg = Registration(cal)
-    n_threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    reg1 = Registration(cal)  # one chunk of rows: nothing to merge
-    numba.set_num_threads(n_threads)
+    cal = reg.calibration
+    reg1 = single_threaded(lambda _: Registration(cal))(0)  # one chunk of rows: no merge
     nearest = [reg.depth_to_thermal(d) for d, _ in frames]
     tolerance = registration_tolerance(cal)
     out = np.empty(cal.depth.shape, dtype=np.float32)
@@ -173,10 +168,10 @@ def _contenders(
 
 
 def _agreement(
-    cal: Calibration, depth: NDArray[np.uint16], aligner: RsAlign | None
+    reg: Registration, depth: NDArray[np.uint16], aligner: RsAlign | None
 ) -> dict[str, str]:
     """How far the contenders agree on one frame (definitions in bench/peers.py)."""
-    reg = Registration(cal)
+    cal = reg.calibration
     index = thermal_index_image(cal)
     ours_d2t = reg.depth_to_thermal(depth)
     ours_t2d = reg.thermal_to_depth(depth, index)
@@ -309,10 +304,11 @@ def main() -> None:
         except ImportError as exc:
             skipped["rs.align"] = str(exc)
         try:
-            contenders = _contenders(cal, frames, aligner, skipped)
+            reg = Registration(cal)
+            contenders = _contenders(reg, frames, aligner, skipped)
             inter = interleaved(contenders)
             hot = back_to_back(contenders)
-            agreement = _agreement(cal, frames[0][0], aligner)
+            agreement = _agreement(reg, frames[0][0], aligner)
         finally:
             if aligner is not None:
                 aligner.close()

@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 from rich.console import Console
 from rich.table import Table
 
@@ -24,6 +25,12 @@ class Timing:
     median_ms: float
     p90_ms: float
     n: int
+
+    @classmethod
+    def of(cls, name: str, seconds: ArrayLike) -> Timing:
+        """The timing of calls that took ``seconds`` each."""
+        t = np.asarray(seconds)
+        return cls(name, float(np.median(t) * 1e3), float(np.percentile(t, 90) * 1e3), t.size)
 
 
 def counting(fn: Callable[[int], object]) -> Callable[[], object]:
@@ -41,7 +48,7 @@ def measure(name: str, fn: Callable[[], object], n: int = 30, warmup: int = 3) -
         t0 = time.perf_counter()
         fn()
         times[i] = time.perf_counter() - t0
-    return Timing(name, float(np.median(times) * 1e3), float(np.percentile(times, 90) * 1e3), n)
+    return Timing.of(name, times)
 
 
 def report(

@@ -427,10 +427,11 @@ def reference_thermal_to_depth(
     if zbuffer is None:
         zbuffer = reference_depth_to_thermal(calibration, depth, projected)
     idx, ok = nearest_index(calibration, thermal_u, thermal_v)
-    zb = zbuffer.ravel()[np.where(ok, idx, 0)]
+    taken = np.where(ok, idx, 0)
+    zb = zbuffer.ravel()[taken]
     tol = tolerance_m(z) if callable(tolerance_m) else tolerance_m
     occluded = ok & (z > zb + tol)
-    values = np.asarray(thermal, dtype=np.float64).ravel()[np.where(ok, idx, 0)]
+    values = np.asarray(thermal, dtype=np.float64).ravel()[taken]
     values[~ok | occluded] = np.nan
     reason = np.full(depth.shape, Reason.OK, dtype=np.uint8)
     reason[~ok] = Reason.OUTSIDE
