@@ -237,7 +237,6 @@ def _sample(
     lo,
     hi,
     table,
-    thermal,
     tol_sigma,
     tol_slope,
     bilinear,
@@ -292,9 +291,7 @@ def _sample(
                     + np.int32(occluded) * Reason.OCCLUDED
                 )
             if bilinear:
-                _bilinear_row(
-                    ut[:n], vt[:n], zt[:n], rrow, orow, table, thermal, tol_sigma, tol_slope
-                )
+                _bilinear_row(ut[:n], vt[:n], zt[:n], rrow, orow, table, geo, tol_sigma, tol_slope)
             if want_index:
                 irow = index[v]
                 irow[:u0] = -1
@@ -313,9 +310,9 @@ def _fill_outside(drow, orow, rrow):  # pragma: no cover - JIT
 
 
 @numba.njit(inline="always", **_JIT)
-def _bilinear_row(ut, vt, zt, rrow, orow, table, thermal, tol_sigma, tol_slope):  # pragma: no cover
+def _bilinear_row(ut, vt, zt, rrow, orow, table, geo, tol_sigma, tol_slope):  # pragma: no cover
     # bilinear over the neighbours that see the same surface as the depth pixel
-    h_t, w_t = thermal.shape
+    w_t, h_t = int(geo[13]), int(geo[14])
     for u in range(ut.size):
         if rrow[u] != 0:
             continue
@@ -332,8 +329,9 @@ def _bilinear_row(ut, vt, zt, rrow, orow, table, thermal, tol_sigma, tol_slope):
                 uu = min(max(u0 + du, 0), w_t - 1)
                 vv = min(max(v0 + dv, 0), h_t - 1)
                 wgt = (fu if du else np.float32(1.0) - fu) * (fv if dv else np.float32(1.0) - fv)
-                if wgt > 0 and pz <= table[vv * w_t + uu, 1] + tol:
-                    acc += wgt * thermal[vv, uu]
+                j = vv * w_t + uu
+                if wgt > 0 and pz <= table[j, 1] + tol:
+                    acc += wgt * table[j, 0]
                     wsum += wgt
         if wsum > 0:
             orow[u] = acc / wsum
@@ -395,10 +393,10 @@ class Registration:
         self.tolerance = tolerance or OcclusionTolerance()
         self.paper_reference_m = paper_reference_m
         t = calibration.thermal
-        self._scale = np.float32(calibration.depth_scale_m)
         if method == "paper":
             self._paper = _PaperMaps.fit(calibration, paper_reference_m)
             return
+        self._scale = np.float32(calibration.depth_scale_m)
         self._rays = _ray_terms(calibration)
         tr = calibration.thermal_from_depth.translation_m
         self._geo = np.array(
@@ -541,7 +539,6 @@ class Registration:
             self._span_lo,
             self._span_hi,
             table,
-            therm,
             self._tol_sigma,
             self._tol_slope,
             interpolation == "bilinear",
