@@ -128,6 +128,11 @@ def test_spot_at_point() -> None:
     assert np.isnan(spot_at_point([5.0, 0.0, 2.0], temp, z, PINHOLE, cam))  # outside the view
 
 
+def test_alarm_rule_needs_at_least_one_frame() -> None:
+    with pytest.raises(ValueError, match="'hot': for_frames must be >= 1, got 0"):
+        AlarmRule("hot", 50.0, for_frames=0)
+
+
 def test_alarm_trips_after_n_frames_and_clears() -> None:
     tracker = AlarmTracker([AlarmRule("hot", 60.0, 3), AlarmRule("roi", 30.0, 1, "plate")])
     z = np.full((120, 160), 1.0)

@@ -343,15 +343,19 @@ class AlarmRule:
     for_frames: int = 1
     what: str = "hotspot"
 
+    def __post_init__(self) -> None:
+        if self.for_frames < 1:
+            raise ValueError(f"alarm {self.name!r}: for_frames must be >= 1, got {self.for_frames}")
+
 
 @dataclass
 class AlarmTracker:
     """Counts consecutive frames over each rule; emits an event when a rule trips and when
-    it clears. Events are plain dicts ready for JSON lines."""
+    it clears. A rule is active while its count reaches ``for_frames``. Events are plain
+    dicts ready for JSON lines."""
 
     rules: Sequence[AlarmRule]
     counts: dict[str, int] = field(default_factory=dict)
-    active: set[str] = field(default_factory=set)
 
     def update(
         self, time_s: float, frame_index: int, hotspots: Sequence[Hotspot], rois: Iterable[RoiStats]
@@ -366,13 +370,12 @@ class AlarmTracker:
                 subject = by_name.get(rule.what)
                 value = subject.max_c if subject and subject.n else float("nan")
             over = bool(np.isfinite(value) and value > rule.above_c)
-            self.counts[rule.name] = self.counts.get(rule.name, 0) + 1 if over else 0
-            tripped = self.counts[rule.name] >= rule.for_frames
-            if tripped and rule.name not in self.active:
-                self.active.add(rule.name)
+            count = self.counts.get(rule.name, 0)
+            was_active = count >= rule.for_frames
+            self.counts[rule.name] = count + 1 if over else 0
+            if self.counts[rule.name] >= rule.for_frames and not was_active:
                 events.append(_event("alarm", rule, time_s, frame_index, value, subject))
-            elif not over and rule.name in self.active:
-                self.active.discard(rule.name)
+            elif not over and was_active:
                 events.append(_event("clear", rule, time_s, frame_index, value, subject))
         return events
 
