@@ -168,11 +168,7 @@ def tee(source: Source, recorder: Recorder) -> Iterator[FramePair]:
     """Yield the source's FramePairs while the recorder stores every event (raw stream frames
     included). The pipeline's ``run --record`` seam; a source without pairs is refused
     (:meth:`~thermodepth.sources.base.Source.require_pairs`)."""
-    source.require_pairs()
-    for event in source.events():
-        recorder.add(event)
-        if isinstance(event, Match):
-            yield event.pair
+    return source.pairs(recorder.add)
 
 
 def record_session(
@@ -256,7 +252,7 @@ def run_session(
 
     try:
         with _session(source, result, open_outputs) as recorder:
-            pairs = tee(source, recorder) if recorder else iter(source)
+            pairs = source.pairs(recorder.add if recorder else None)
             for pair in pairs:
                 fused = pipeline.process(pair)
                 result.frames += 1

@@ -56,11 +56,19 @@ class Source:
                 "(use realsense+lepton, sim or recording:PATH)"
             )
 
-    def __iter__(self) -> Iterator[FramePair]:
+    def pairs(self, on_event: Callable[[StreamEvent], None] | None = None) -> Iterator[FramePair]:
+        """The FramePairs of the stream; ``on_event`` sees every event first (a recorder's
+        ``add``: raw frames included). A source without pairs is refused
+        (:meth:`require_pairs`)."""
         self.require_pairs()
         for event in self.events():
+            if on_event is not None:
+                on_event(event)
             if isinstance(event, Match):
                 yield event.pair
+
+    def __iter__(self) -> Iterator[FramePair]:
+        return self.pairs()
 
     def close(self) -> None:
         """Release the devices or files (idempotent)."""
