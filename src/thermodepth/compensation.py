@@ -23,7 +23,7 @@ the distance; both are fitted on a sweep (``thermodepth.sweep``) and saved as ve
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from enum import IntFlag
 from pathlib import Path
@@ -722,29 +722,38 @@ class DistanceScore:
     sd_c: float
 
 
-def score(compensated_c: FloatArray, table: SweepTable) -> list[DistanceScore]:
-    """Scores per (reference temperature, distance) of compensated readings of ``table``."""
+def _groups(
+    compensated_c: FloatArray, table: SweepTable
+) -> Iterator[tuple[float, float, NDArray[np.bool_]]]:
+    """(reference temperature, distance, rows) of every group of ``table`` with a finite
+    compensated reading, by reference then distance."""
     ref, d = table["reference_temp_c"], table["distance_m"]
-    out = []
+    finite = np.isfinite(compensated_c)
     for r in np.unique(ref):
         for dist in np.unique(d[ref == r]):
-            sel = (ref == r) & (d == dist) & np.isfinite(compensated_c)
-            v = compensated_c[sel]
-            if v.size == 0:
-                continue
-            e = v - r
-            out.append(
-                DistanceScore(
-                    float(dist),
-                    float(r),
-                    int(v.size),
-                    float(v.mean()),
-                    float(abs(v.mean() - r) / abs(r) * 100),
-                    float(np.sqrt(np.mean(e**2))),
-                    float(np.abs(e).max()),
-                    float(v.std(ddof=1)) if v.size > 1 else 0.0,
-                )
+            sel = (ref == r) & (d == dist) & finite
+            if sel.any():
+                yield float(r), float(dist), sel
+
+
+def score(compensated_c: FloatArray, table: SweepTable) -> list[DistanceScore]:
+    """Scores per (reference temperature, distance) of compensated readings of ``table``."""
+    out = []
+    for r, dist, sel in _groups(compensated_c, table):
+        v = compensated_c[sel]
+        e = v - r
+        out.append(
+            DistanceScore(
+                dist,
+                r,
+                int(v.size),
+                float(v.mean()),
+                float(abs(v.mean() - r) / abs(r) * 100),
+                float(np.sqrt(np.mean(e**2))),
+                float(np.abs(e).max()),
+                float(v.std(ddof=1)) if v.size > 1 else 0.0,
             )
+        )
     return out
 
 
@@ -770,13 +779,8 @@ def by_vox(
     layout of the paper's Tables 1-5."""
     out: dict[tuple[float, float], dict[float, float]] = {}
     vox_bin = np.round(table["vox_temp_c"] / step_c) * step_c
-    for s in score(compensated_c, table):
-        sel = (
-            (table["reference_temp_c"] == s.reference_temp_c)
-            & (table["distance_m"] == s.distance_m)
-            & np.isfinite(compensated_c)
-        )
-        out[(s.reference_temp_c, s.distance_m)] = {
+    for r, dist, sel in _groups(compensated_c, table):
+        out[(r, dist)] = {
             float(b): float(compensated_c[sel][vox_bin[sel] == b].mean())
             for b in np.unique(vox_bin[sel])
         }
