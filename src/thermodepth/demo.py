@@ -365,17 +365,15 @@ def _inspection(
             last = frames[-1]
             plate = float(np.nanmedian(last.temp_depth_c[patch]))
             hot = last.hotspots[0] if last.hotspots else None
+            nan = float("nan")
+            chip_max_c = hot.max_c if hot else nan
             alarms = sum(e["event"] == "alarm" for f in frames for e in f.events)
-            row += [plate, hot.max_c if hot else float("nan")]
+            row += [plate, chip_max_c]
             if name == "radiance":
-                err = (
-                    float(np.linalg.norm(np.array(hot.centroid_m) - truth_chip))
-                    if hot
-                    else float("nan")
-                )
+                err = float(np.linalg.norm(np.array(hot.centroid_m) - truth_chip)) if hot else nan
                 row += [
-                    hot.distance_m if hot else float("nan"),
-                    1e4 * hot.area_m2 if hot else float("nan"),
+                    hot.distance_m if hot else nan,
+                    1e4 * hot.area_m2 if hot else nan,
                     "yes" if hot and hot.resolvable else "no",
                     1000 * err,
                     alarms,

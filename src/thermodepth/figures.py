@@ -74,9 +74,9 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
     refs = np.unique(table["reference_temp_c"])
     compensated = apply_to_table(model, table).temp_c
     paths = []
-    for name, values, title in (
-        ("fig13_uncompensated.png", table["measured_temp_c"], "uncompensated (Fig. 13)"),
-        ("fig14_compensated.png", compensated, f"compensated, {model.method} (Fig. 14)"),
+    for name, values, title, with_curves in (
+        ("fig13_uncompensated.png", table["measured_temp_c"], "uncompensated (Fig. 13)", True),
+        ("fig14_compensated.png", compensated, f"compensated, {model.method} (Fig. 14)", False),
     ):
         fig, axes = plt.subplots(1, refs.size, figsize=(5.2 * refs.size, 4.0), squeeze=False)
         bins = by_vox(values, table)  # means per 1 C of VOx
@@ -86,7 +86,7 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
             for d, color in zip(dists, colors, strict=True):
                 x, y = np.array(list(bins[(float(r), d)].items())).T
                 ax.plot(x, y, "o", ms=3, color=color, label=f"{d:g} m")
-                if name.startswith("fig13"):
+                if with_curves:  # the model's prediction of the uncompensated reading
                     xs = np.linspace(x.min(), x.max(), 100)
                     if isinstance(model, PaperModel):
                         if d in model.distances_m and np.isclose(r, model.reference_temp_c):
