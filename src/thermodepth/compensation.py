@@ -462,10 +462,7 @@ class _Design:
 
     w_meas: FloatArray
     w_ap: FloatArray
-    vox: FloatArray
     weight: FloatArray
-    distance: FloatArray
-    reference: FloatArray
     centre: float
     scale: float
     table: SweepTable
@@ -492,10 +489,7 @@ class _Design:
         return cls(
             w_meas,
             w_ap,
-            x,
             weight,
-            table["distance_m"],
-            table["reference_temp_c"],
             centre,
             scale,
             table,
@@ -507,8 +501,9 @@ class _Design:
         self, g_deg: int, h_deg: int, fixed_gain: bool, rows: NDArray[np.bool_] | None = None
     ) -> tuple[FloatArray, FloatArray]:
         sel = slice(None) if rows is None else rows
-        t_g = _vox_basis(self.vox[sel], self.centre, self.scale, g_deg)
-        t_h = _vox_basis(self.vox[sel], self.centre, self.scale, h_deg)
+        vox = self.table["vox_temp_c"][sel]
+        t_g = _vox_basis(vox, self.centre, self.scale, g_deg)
+        t_h = _vox_basis(vox, self.centre, self.scale, h_deg)
         target = self.w_meas[sel]
         if fixed_gain:
             target = target - self.w_ap[sel]
@@ -524,10 +519,11 @@ class _Design:
     def folds(self) -> dict[str, NDArray[np.bool_]]:
         """Held-out rows per fold, by name: each distance, and each reference temperature
         when there are several (what the model must generalise over)."""
-        out = {f"distance {d:g} m": self.distance == d for d in np.unique(self.distance)}
-        refs = np.unique(self.reference)
+        distance, reference = self.table["distance_m"], self.table["reference_temp_c"]
+        out = {f"distance {d:g} m": distance == d for d in np.unique(distance)}
+        refs = np.unique(reference)
         if refs.size > 1:
-            out |= {f"target {r:g} C": self.reference == r for r in refs}
+            out |= {f"target {r:g} C": reference == r for r in refs}
         return out
 
     def held_out_errors(self, g_deg: int, h_deg: int, fixed_gain: bool) -> FloatArray:
