@@ -268,7 +268,8 @@ def jit_compile_ms() -> str:
             f"cached, then {warm[key][1]:.1f} ms"
             for key in ("depth_to_thermal", "thermal_to_depth")
         )
-        + " (thermal_to_depth compiles only its sampling kernel: the z-buffer is compiled by then)"
+        + " (each compiles its own kernel; thermal_to_depth standalone builds its z-buffer inside"
+        " its sampling kernel)"
     )
 
 

@@ -68,7 +68,12 @@ class ThermalOnDepth(NamedTuple):
 # kernels
 # ---------------------------------------------------------------------------------------------
 
-_JIT: dict[str, Any] = {"cache": True, "fastmath": True, "error_model": "numpy"}
+# fastmath without "reassoc": LLVM then may not reorder sums, so _project rounds the same in
+# every kernel it is inlined into, and the z-buffer of depth_to_thermal, the one thermal_to_depth
+# builds for itself and its sampling all agree on each pixel (with reassoc, 12 of 18.4 M pixels
+# took another thermal pixel in one of two kernels; the speed is the same, measured).
+_FASTMATH = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
+_JIT: dict[str, Any] = {"cache": True, "fastmath": _FASTMATH, "error_model": "numpy"}
 
 # geo (float32): t (3), fx, fy, cx, cy, k1, k2, p1, p2, k3, r2max, width, height of the
 # thermal camera (the size as float32 too: comparing a float32 with an int goes through
@@ -123,14 +128,18 @@ _SPAN_MARGIN = 2  # pixels: float32 rounding and the curvature between grid poin
 
 
 @numba.njit(parallel=True, **_JIT)
-def _view_table(scale, a0, a1, a2, brow, geo, lo, hi):  # pragma: no cover - JIT
+def _view_table(scale, a0, a1, a2, brow, geo, lo, hi, reach):  # pragma: no cover - JIT
     # lo[v, k], hi[v, k]: the depth pixels u of row v, lo <= u < hi, that land in the thermal
-    # image at inverse depth w = k * _W_STEP (lo >= hi: none)
+    # image at inverse depth w = k * _W_STEP (lo >= hi: none); reach[v]: the first and last
+    # thermal rows that row v lands in over the whole table (first > last: none)
     h = brow.shape[0]
     w = a0.shape[1]
+    w_t = np.int32(geo[13])
     for v in numba.prange(h):
         rv = min(np.int64(v), a0.shape[0] - 1)  # prange indices are unsigned
         b = brow[v]
+        top = np.int32(2**30)
+        bottom = np.int32(-1)
         for k in range(lo.shape[1]):
             inv = max(k * _W_STEP, 1e-6)
             d = np.float32(1.0 / (inv * scale))  # the depth, in depth units
@@ -141,13 +150,18 @@ def _view_table(scale, a0, a1, a2, brow, geo, lo, hi):  # pragma: no cover - JIT
                 if i >= 0:
                     first = min(first, u)
                     last = max(last, u)
+                    top = min(top, i // w_t)
+                    bottom = max(bottom, i // w_t)
             lo[v, k] = first
             hi[v, k] = last + 1
+        reach[v, 0] = top
+        reach[v, 1] = bottom
 
 
 @numba.njit(inline="always", **_JIT)
 def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
-    # [u0, u1): where this row's pixels can land in the thermal image, given its depth range
+    # [u0, u1): where this row's pixels can land in the thermal image, given its depth range;
+    # near: the row has depth nearer than the table reaches (then [u0, u1) is the whole row)
     w = drow.size
     dmin = np.uint16(65535)
     dmax = np.uint16(0)
@@ -156,13 +170,13 @@ def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
         dmin = min(dmin, d if d > 0 else np.uint16(65535))
         dmax = max(dmax, d)
     if dmax == 0:
-        return 0, 0  # no valid depth at all
+        return 0, 0, False  # no valid depth at all
     w_lo = 1.0 / (np.float32(dmax) * scale)
     w_hi = 1.0 / (np.float32(dmin) * scale)
     k0 = int(np.floor(w_lo / _W_STEP))
     k1 = int(np.ceil(w_hi / _W_STEP))
     if k1 >= lo_row.size:
-        return 0, w  # nearer than the table reaches: look at everything
+        return 0, w, True  # look at everything
     u0 = w
     u1 = 0
     for k in range(k0, k1 + 1):
@@ -170,8 +184,43 @@ def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
             u0 = min(u0, lo_row[k])
             u1 = max(u1, hi_row[k])
     if u0 >= u1:
-        return 0, 0
-    return max(u0 - _SPAN_MARGIN, 0), min(u1 + _SPAN_MARGIN, w)
+        return 0, 0, False
+    return max(u0 - _SPAN_MARGIN, 0), min(u1 + _SPAN_MARGIN, w), False
+
+
+_REACH_SLACK = 1  # thermal rows: a pixel's row between the table's grid points, and rounding
+
+
+def _sampling_lag(reach: NDArray[np.int32]) -> int:
+    """Depth rows: how far apart two depth rows can be and still meet in the z-buffer, one
+    landing in a thermal row that the other samples (its nearest pixel's row or, bilinear,
+    the row above or below). reach (H, 2): each row's first and last thermal row over the
+    view table (:func:`_view_table`)."""
+    rows = np.flatnonzero(reach[:, 0] <= reach[:, 1])
+    if rows.size == 0:
+        return 0
+    top, bottom = reach[rows, 0], reach[rows, 1]
+    gap = 2 * _REACH_SLACK + 1
+    meet = (top[None, :] - bottom[:, None] <= gap) & (top[:, None] - bottom[None, :] <= gap)
+    return int(np.abs(rows[:, None] - rows[None, :])[meet].max())
+
+
+_SCATTER_STRIDE = 8  # depth pixels: more than one thermal pixel spans (~4 on the D435 + Lepton)
+
+
+@numba.njit(inline="always", **_JIT)
+def _scatter_min(idx, values, buf, n):  # pragma: no cover - JIT
+    # buf[idx[u]] = min(buf[idx[u]], values[u]) for u < n where idx[u] >= 0. Neighbouring
+    # depth pixels share a thermal pixel: in order, each min would wait for the store of the
+    # one before (store-to-load forwarding). _SCATTER_STRIDE apart they land in different
+    # thermal pixels and the updates overlap (measured 1.17x faster on one thread, 1.04-1.11x
+    # on two).
+    for s in range(_SCATTER_STRIDE):
+        for m in range((n - s + _SCATTER_STRIDE - 1) // _SCATTER_STRIDE):
+            u = m * _SCATTER_STRIDE + s
+            i = idx[u]
+            if i >= 0:
+                buf[i] = min(buf[i], values[u])
 
 
 # The z-buffer keeps, per thermal pixel, one uint64 key: the float32 bits of Z above those of
@@ -179,7 +228,6 @@ def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
 # one branch-free min per pixel updates both (a compare-and-branch on noisy Z mispredicts:
 # measured 1.7x slower). The empty key decodes to Z = inf, range = NaN.
 _EMPTY_KEY = np.uint64(0x7F800000_7FC00000)
-_SCATTER_STRIDE = 8  # depth pixels: more than one thermal pixel spans (~4 on the D435 + Lepton)
 
 
 @numba.njit(parallel=True, **_JIT)
@@ -193,13 +241,14 @@ def _zbuffer(depth, scale, a0, a1, a2, brow, geo, lo, hi, keys):  # pragma: no c
         zt = np.empty(w, np.float32)
         rt = np.empty(w, np.float32)
         idx = np.empty(w, np.int32)
+        key = np.empty(w, np.uint64)
         zbits = zt.view(np.uint32)
         rbits = rt.view(np.uint32)
         for v in range(k * h // n_chunks, (k + 1) * h // n_chunks):
             rv = min(v, a0.shape[0] - 1)
             drow, ar0, ar1, ar2 = depth[v], a0[rv], a1[rv], a2[rv]
             b0, b1, b2 = brow[v, 0], brow[v, 1], brow[v, 2]
-            u0, u1 = _row_span(drow, scale, lo[v], hi[v])
+            u0, u1, _ = _row_span(drow, scale, lo[v], hi[v])
             # loops over views that start at 0: a non-zero range start would make numba
             # check every index for wraparound, which stops vectorisation (4x slower)
             dr, c0, c1, c2 = drow[u0:u1], ar0[u0:u1], ar1[u0:u1], ar2[u0:u1]
@@ -209,17 +258,9 @@ def _zbuffer(depth, scale, a0, a1, a2, brow, geo, lo, hi, keys):  # pragma: no c
                 zt[u] = pz
                 rt[u] = np.sqrt(px * px + py * py + pz * pz)
                 idx[u] = i
-            # neighbouring depth pixels share a thermal pixel: in order, each min would wait
-            # for the store of the one before (store-to-load forwarding). _SCATTER_STRIDE
-            # apart they land in different thermal pixels and the updates overlap (measured
-            # 1.17x faster on one thread, 1.04-1.11x on two).
-            for s in range(_SCATTER_STRIDE):
-                for m in range((n - s + _SCATTER_STRIDE - 1) // _SCATTER_STRIDE):
-                    u = m * _SCATTER_STRIDE + s
-                    i = idx[u]
-                    if i >= 0:
-                        key = (np.uint64(zbits[u]) << np.uint64(32)) | np.uint64(rbits[u])
-                        kloc[i] = min(kloc[i], key)
+            for u in range(n):
+                key[u] = (np.uint64(zbits[u]) << np.uint64(32)) | np.uint64(rbits[u])
+            _scatter_min(idx, key, kloc, n)
     for i in range(keys.shape[1]):  # serial: 19,200 compares cost less than waking threads
         for k in range(1, n_chunks):
             keys[0, i] = min(keys[0, i], keys[k, i])
@@ -236,7 +277,10 @@ def _sample(
     geo,
     lo,
     hi,
-    table,
+    values,
+    nearest_z,
+    build,
+    lag,
     tol_sigma,
     tol_slope,
     bilinear,
@@ -245,45 +289,84 @@ def _sample(
     reason,
     want_index,
     index,
+    near,
 ):  # pragma: no cover - JIT
-    # table (h_t * w_t, 2): each thermal pixel's value and nearest Z side by side (one load);
-    # index (H, W) gets the flat thermal index each depth pixel took (-1: none) if want_index
+    # values, nearest_z (h_t * w_t): each thermal pixel's value and the Z of its nearest
+    # surface. build: nearest_z is yet to fill (inf). Each chunk of rows then fills a copy of
+    # its own from its rows and the `lag` rows either side of them (all the rows that can land
+    # in a thermal pixel its rows sample), in one pass: each row is projected once, into a ring
+    # of lag + 1 rows, and sampled once the lag rows after it are in. One parallel region and
+    # one projection per pixel, where building the whole z-buffer first takes two of each.
+    # near[k] = 1: a row chunk k looked at has depth nearer than the view table reaches; its
+    # pixels can land anywhere, so the caller must build the whole z-buffer and call again.
+    # index (H, W) gets the flat thermal index each depth pixel took (-1: none) if want_index.
     h, w = depth.shape
     nan = np.float32(np.nan)
+    lag = lag if build else 0
+    ring = lag + 1
     for k in numba.prange(n_chunks):
-        ut = np.empty(w, np.float32)
-        vt = np.empty(w, np.float32)
-        zt = np.empty(w, np.float32)
-        idx = np.empty(w, np.int32)
+        first = k * h // n_chunks
+        end = (k + 1) * h // n_chunks
+        zbuf = nearest_z.copy() if build else nearest_z
+        n_uv = ring if bilinear else 1  # nearest sampling needs no (u, v) once projected
+        ut = np.empty((n_uv, w), np.float32)
+        vt = np.empty((n_uv, w), np.float32)
+        zt = np.empty((ring, w), np.float32)
+        idx = np.empty((ring, w), np.int32)
+        spans = np.empty((ring, 2), np.int64)
         val = np.empty(w, np.float32)
-        near = np.empty(w, np.float32)
-        for v in range(k * h // n_chunks, (k + 1) * h // n_chunks):
-            rv = min(v, a0.shape[0] - 1)
-            drow, ar0, ar1, ar2 = depth[v], a0[rv], a1[rv], a2[rv]
-            b0, b1, b2 = brow[v, 0], brow[v, 1], brow[v, 2]
-            u0, u1 = _row_span(drow, scale, lo[v], hi[v])
+        near_z = np.empty(w, np.float32)
+        stop = min(end + lag, h)
+        for p in range(max(first - lag, 0), end + lag):
+            if p < stop:  # project row p into the ring (and the z-buffer)
+                slot = p % ring
+                uv = slot if bilinear else 0
+                rp = min(p, a0.shape[0] - 1)
+                drow, ar0, ar1, ar2 = depth[p], a0[rp], a1[rp], a2[rp]
+                b0, b1, b2 = brow[p, 0], brow[p, 1], brow[p, 2]
+                u0, u1, is_near = _row_span(drow, scale, lo[p], hi[p])
+                if build and is_near:
+                    near[k] = 1
+                spans[slot, 0] = u0
+                spans[slot, 1] = u1
+                # loops over views that start at 0 (see _zbuffer)
+                dr, c0, c1, c2 = drow[u0:u1], ar0[u0:u1], ar1[u0:u1], ar2[u0:u1]
+                ur, vr, zr, ir = ut[uv], vt[uv], zt[slot], idx[slot]
+                if bilinear:
+                    for u in range(dr.size):
+                        ur[u], vr[u], _, _, zr[u], ir[u] = _project(
+                            dr[u], scale, c0[u], c1[u], c2[u], b0, b1, b2, geo
+                        )
+                else:
+                    for u in range(dr.size):
+                        _, _, _, _, zr[u], ir[u] = _project(
+                            dr[u], scale, c0[u], c1[u], c2[u], b0, b1, b2, geo
+                        )
+                if build:
+                    _scatter_min(ir, zr, zbuf, dr.size)
+            v = p - lag  # sample row v: every row that can reach its thermal pixels is in
+            if v < first:
+                continue
+            slot = v % ring
+            u0, u1 = spans[slot, 0], spans[slot, 1]
+            drow = depth[v]
             # outside the span: invalid depth, or out of the thermal view
             _fill_outside(drow[:u0], out[v, :u0], reason[v, :u0])
             _fill_outside(drow[u1:], out[v, u1:], reason[v, u1:])
-            # inside: loops over views that start at 0 (see _zbuffer)
-            dr, c0, c1, c2 = drow[u0:u1], ar0[u0:u1], ar1[u0:u1], ar2[u0:u1]
             orow, rrow = out[v, u0:u1], reason[v, u0:u1]
-            n = dr.size
+            zr, ir = zt[slot], idx[slot]
+            n = u1 - u0
             for u in range(n):
-                ut[u], vt[u], _, _, zt[u], idx[u] = _project(
-                    dr[u], scale, c0[u], c1[u], c2[u], b0, b1, b2, geo
-                )
+                j = max(ir[u], np.int32(0))
+                val[u] = values[j]
+                near_z[u] = zbuf[j]
             for u in range(n):
-                j = max(idx[u], np.int32(0))
-                val[u] = table[j, 0]
-                near[u] = table[j, 1]
-            for u in range(n):
-                i = idx[u]
-                pz = zt[u]
+                i = ir[u]
+                pz = zr[u]
                 # hidden when the thermal pixel's nearest surface is clearly in front: beyond
                 # the depth noise (sigma ~ z^2) and the spread of a slanted surface in a pixel
                 tol = tol_sigma * pz * pz + tol_slope * pz
-                occluded = (i >= 0) & (pz > near[u] + tol)
+                occluded = (i >= 0) & (pz > near_z[u] + tol)
                 orow[u] = val[u] if (i >= 0) & ~occluded else nan
                 rrow[u] = np.uint8(
                     np.int32(i == -1) * Reason.INVALID_DEPTH
@@ -291,14 +374,25 @@ def _sample(
                     + np.int32(occluded) * Reason.OCCLUDED
                 )
             if bilinear:
-                _bilinear_row(ut[:n], vt[:n], zt[:n], rrow, orow, table, geo, tol_sigma, tol_slope)
+                _bilinear_row(
+                    ut[slot][:n],
+                    vt[slot][:n],
+                    zr[:n],
+                    rrow,
+                    orow,
+                    values,
+                    zbuf,
+                    geo,
+                    tol_sigma,
+                    tol_slope,
+                )
             if want_index:
                 irow = index[v]
                 irow[:u0] = -1
                 irow[u1:] = -1
                 iin = irow[u0:u1]
                 for u in range(n):
-                    iin[u] = idx[u] if rrow[u] == Reason.OK else -1
+                    iin[u] = ir[u] if rrow[u] == Reason.OK else -1
 
 
 @numba.njit(inline="always", **_JIT)
@@ -310,7 +404,9 @@ def _fill_outside(drow, orow, rrow):  # pragma: no cover - JIT
 
 
 @numba.njit(inline="always", **_JIT)
-def _bilinear_row(ut, vt, zt, rrow, orow, table, geo, tol_sigma, tol_slope):  # pragma: no cover
+def _bilinear_row(
+    ut, vt, zt, rrow, orow, values, zbuf, geo, tol_sigma, tol_slope
+):  # pragma: no cover
     # bilinear over the neighbours that see the same surface as the depth pixel
     w_t, h_t = int(geo[13]), int(geo[14])
     for u in range(ut.size):
@@ -330,8 +426,8 @@ def _bilinear_row(ut, vt, zt, rrow, orow, table, geo, tol_sigma, tol_slope):  # 
                 vv = min(max(v0 + dv, 0), h_t - 1)
                 wgt = (fu if du else np.float32(1.0) - fu) * (fv if dv else np.float32(1.0) - fv)
                 j = vv * w_t + uu
-                if wgt > 0 and pz <= table[j, 1] + tol:
-                    acc += wgt * table[j, 0]
+                if wgt > 0 and pz <= zbuf[j] + tol:
+                    acc += wgt * values[j]
                     wsum += wgt
         if wsum > 0:
             orow[u] = acc / wsum
@@ -417,7 +513,9 @@ class Registration:
         self._n_chunks = max(1, numba.get_num_threads())
         self._span_lo = np.empty((calibration.depth.height, _W_SAMPLES), dtype=np.int32)
         self._span_hi = np.empty_like(self._span_lo)
-        _view_table(self._scale, *self._rays, self._geo, self._span_lo, self._span_hi)
+        reach = np.empty((calibration.depth.height, 2), dtype=np.int32)
+        _view_table(self._scale, *self._rays, self._geo, self._span_lo, self._span_hi, reach)
+        self._lag = _sampling_lag(reach)
 
     @classmethod
     def from_file(
@@ -524,30 +622,43 @@ class Registration:
             )
         if self.method == "paper":
             return self._paper.thermal_to_depth(depth, therm, interpolation, thermal_index)
-        if nearest is None:
-            zbuf = self._zbuffer(depth)[0]
+        if nearest is None:  # the sampling kernel builds its own z-buffer
+            zbuf = np.full(therm.size, np.inf, dtype=np.float32)
         else:
             zbuf = np.where(np.isnan(nearest.z_m), np.float32(np.inf), nearest.z_m).ravel()
-        table = np.stack([therm.ravel(), zbuf], axis=1)  # value and nearest Z: one load
         out = np.empty(depth.shape, dtype=np.float32)
         reason = np.empty(depth.shape, dtype=np.uint8)
-        _sample(
-            depth,
-            self._scale,
-            *self._rays,
-            self._geo,
-            self._span_lo,
-            self._span_hi,
-            table,
-            self._tol_sigma,
-            self._tol_slope,
-            interpolation == "bilinear",
-            self._n_chunks,
-            out,
-            reason,
-            thermal_index is not None,
-            thermal_index if thermal_index is not None else np.empty((1, 1), np.int32),
-        )
+        near = np.zeros(self._n_chunks, dtype=np.uint8)
+        index = thermal_index if thermal_index is not None else np.empty((1, 1), np.int32)
+
+        def sample(zbuf: FloatArray, build: bool) -> None:
+            _sample(
+                depth,
+                self._scale,
+                *self._rays,
+                self._geo,
+                self._span_lo,
+                self._span_hi,
+                therm.ravel(),
+                zbuf,
+                build,
+                self._lag,
+                self._tol_sigma,
+                self._tol_slope,
+                interpolation == "bilinear",
+                self._n_chunks,
+                out,
+                reason,
+                thermal_index is not None,
+                index,
+                near,
+            )
+
+        sample(zbuf, nearest is None)
+        if near.any():
+            # depth nearer than the view table reaches: those pixels can land in any thermal
+            # row, beyond the lag rows a chunk takes in, so build the whole z-buffer first
+            sample(np.ascontiguousarray(self._zbuffer(depth)[0]), False)
         return ThermalOnDepth(out, reason)
 
     # -- the paper's method ------------------------------------------------------------------
