@@ -129,26 +129,27 @@ def _project(d, scale, a0, a1, a2, b0, b1, b2, geo):  # pragma: no cover - JIT
 _W_STEP = 0.25  # 1/m: the table's grid of inverse depth, 0 .. 10 (z >= 0.1 m)
 _W_SAMPLES = 41
 _SPAN_MARGIN = 2  # pixels: float32 rounding and the curvature between grid points
+_NOWHERE = 1 << 30  # a thermal row beyond any image: the bound of an empty set of rows
 
 
 @numba.njit(parallel=True, **_JIT)
 def _view_table(scale, a0, a1, a2, brow, geo, lo, hi, reach):  # pragma: no cover - JIT
     # lo[v, k], hi[v, k]: the depth pixels u of row v, lo <= u < hi, that land in the thermal
-    # image at inverse depth w = k * _W_STEP (lo >= hi: none); reach[v]: the first and last
-    # thermal rows that row v lands in over the whole table (first > last: none)
+    # image at inverse depth w = k * _W_STEP (lo >= hi: none); reach[v, k]: the first and
+    # last thermal rows they land in (first > last: none)
     h = brow.shape[0]
     w = a0.shape[1]
     w_t = np.int32(geo[13])
     for v in numba.prange(h):
         rv = min(np.int64(v), a0.shape[0] - 1)  # prange indices are unsigned
         b = brow[v]
-        top = np.int32(2**30)
-        bottom = np.int32(-1)
         for k in range(lo.shape[1]):
             inv = max(k * _W_STEP, 1e-6)
             d = np.float32(1.0 / (inv * scale))  # the depth, in depth units
             first = w
             last = -1
+            top = _NOWHERE
+            bottom = -_NOWHERE
             for u in range(w):
                 i = _project(d, scale, a0[rv, u], a1[rv, u], a2[rv, u], b[0], b[1], b[2], geo)[5]
                 if i >= 0:
@@ -158,14 +159,15 @@ def _view_table(scale, a0, a1, a2, brow, geo, lo, hi, reach):  # pragma: no cove
                     bottom = max(bottom, i // w_t)
             lo[v, k] = first
             hi[v, k] = last + 1
-        reach[v, 0] = top
-        reach[v, 1] = bottom
+            reach[v, k, 0] = top
+            reach[v, k, 1] = bottom
 
 
 @numba.njit(inline="always", **_JIT)
 def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
-    # [u0, u1): where this row's pixels can land in the thermal image, given its depth range;
-    # near: the row has depth nearer than the table reaches (then [u0, u1) is the whole row)
+    # [u0, u1): where this row's pixels can land in the thermal image, given its depth range,
+    # and [k0, k1]: the table's grid points of inverse depth around that range (k0 > k1: no
+    # valid depth; k1 off the table: nearer than it reaches, and [u0, u1) the whole row)
     w = drow.size
     dmin = np.uint16(65535)
     dmax = np.uint16(0)
@@ -174,13 +176,13 @@ def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
         dmin = min(dmin, d if d > 0 else np.uint16(65535))
         dmax = max(dmax, d)
     if dmax == 0:
-        return 0, 0, False  # no valid depth at all
+        return 0, 0, 1, 0
     w_lo = 1.0 / (np.float32(dmax) * scale)
     w_hi = 1.0 / (np.float32(dmin) * scale)
     k0 = int(np.floor(w_lo / _W_STEP))
     k1 = int(np.ceil(w_hi / _W_STEP))
     if k1 >= lo_row.size:
-        return 0, w, True  # look at everything
+        return 0, w, k0, k1  # look at everything
     u0 = w
     u1 = 0
     for k in range(k0, k1 + 1):
@@ -188,8 +190,23 @@ def _row_span(drow, scale, lo_row, hi_row):  # pragma: no cover - JIT
             u0 = min(u0, lo_row[k])
             u1 = max(u1, hi_row[k])
     if u0 >= u1:
-        return 0, 0, False
-    return max(u0 - _SPAN_MARGIN, 0), min(u1 + _SPAN_MARGIN, w), False
+        return 0, 0, k0, k1
+    return max(u0 - _SPAN_MARGIN, 0), min(u1 + _SPAN_MARGIN, w), k0, k1
+
+
+@numba.njit(inline="always", **_JIT)
+def _row_reach(reach_row, k0, k1):  # pragma: no cover - JIT
+    # the first and last thermal rows a depth row can land in between grid points k0 and k1
+    # (first > last: none; k1 off the table: anywhere)
+    if k1 >= reach_row.shape[0]:
+        return -_NOWHERE, _NOWHERE
+    top = _NOWHERE
+    bottom = -_NOWHERE
+    for k in range(k0, k1 + 1):
+        if reach_row[k, 0] <= reach_row[k, 1]:
+            top = min(top, reach_row[k, 0])
+            bottom = max(bottom, reach_row[k, 1])
+    return top, bottom
 
 
 _REACH_SLACK = 1  # thermal rows: a pixel's row between the table's grid points, and rounding
@@ -198,12 +215,14 @@ _REACH_SLACK = 1  # thermal rows: a pixel's row between the table's grid points,
 def _sampling_lag(reach: NDArray[np.int32]) -> int:
     """Depth rows: how far apart two depth rows can be and still meet in the z-buffer, one
     landing in a thermal row that the other samples (its nearest pixel's row or, bilinear,
-    the row above or below). reach (H, 2): each row's first and last thermal row over the
-    view table (:func:`_view_table`)."""
-    rows = np.flatnonzero(reach[:, 0] <= reach[:, 1])
+    the row above or below), at any depth the view table covers. reach (H, K, 2): the first
+    and last thermal row of each depth row at each of the table's depths (:func:`_view_table`).
+    """
+    top, bottom = reach[:, :, 0].min(axis=1), reach[:, :, 1].max(axis=1)
+    rows = np.flatnonzero(top <= bottom)
     if rows.size == 0:
         return 0
-    top, bottom = reach[rows, 0], reach[rows, 1]
+    top, bottom = top[rows], bottom[rows]
     gap = 2 * _REACH_SLACK + 1
     meet = (top[None, :] - bottom[:, None] <= gap) & (top[:, None] - bottom[None, :] <= gap)
     return int(np.abs(rows[:, None] - rows[None, :])[meet].max())
@@ -252,7 +271,7 @@ def _zbuffer(depth, scale, a0, a1, a2, brow, geo, lo, hi, keys):  # pragma: no c
             rv = min(v, a0.shape[0] - 1)
             drow, ar0, ar1, ar2 = depth[v], a0[rv], a1[rv], a2[rv]
             b0, b1, b2 = brow[v, 0], brow[v, 1], brow[v, 2]
-            u0, u1, _ = _row_span(drow, scale, lo[v], hi[v])
+            u0, u1, _, _ = _row_span(drow, scale, lo[v], hi[v])
             # loops over views that start at 0: a non-zero range start would make numba
             # check every index for wraparound, which stops vectorisation (4x slower)
             dr, c0, c1, c2 = drow[u0:u1], ar0[u0:u1], ar1[u0:u1], ar2[u0:u1]
@@ -281,6 +300,7 @@ def _sample(
     geo,
     lo,
     hi,
+    reach,
     values,
     nearest_z,
     build,
@@ -297,11 +317,12 @@ def _sample(
 ):  # pragma: no cover - JIT
     # values, nearest_z (h_t * w_t): each thermal pixel's value and the Z of its nearest
     # surface (_FAR_M: none). build: nearest_z is yet to fill (all _FAR_M). Each chunk of rows
-    # then fills a copy of its own from its rows and the `lag` rows either side of them (all
-    # the rows that can land in a thermal pixel its rows sample), in one pass: each row is
-    # projected once, into a ring of lag + 1 rows, and sampled once the lag rows after it are
-    # in. One parallel region and one projection per pixel, where building the whole z-buffer
-    # first takes two of each.
+    # then fills a copy of its own, in one pass: it projects its rows, and the rows around
+    # them that can land in a thermal pixel its rows sample, in order, each once, into a ring
+    # of lag + 1 rows (`lag`: the farthest apart two rows can meet, _sampling_lag), and samples
+    # a row as soon as no row still to project can land in the thermal rows it samples (reach:
+    # the view table's thermal rows per depth row and grid point). One parallel region and one
+    # projection per pixel, where building the whole z-buffer first takes two of each.
     # near[k] = 1: a row chunk k looked at has depth nearer than the view table reaches; its
     # pixels can land anywhere, so the caller must build the whole z-buffer and call again.
     # index (H, W) gets the flat thermal index each depth pixel took (-1: none) if want_index.
@@ -309,6 +330,7 @@ def _sample(
     nan = np.float32(np.nan)
     lag = lag if build else 0
     ring = lag + 1
+    gap = 2 * _REACH_SLACK + 1  # thermal rows: two rows' slack and the bilinear neighbour
     for k in numba.prange(n_chunks):
         first = k * h // n_chunks
         end = (k + 1) * h // n_chunks
@@ -318,24 +340,45 @@ def _sample(
         vt = np.empty((n_uv, w), np.float32)
         zt = np.empty((ring, w), np.float32)
         idx = np.empty((ring, w), np.int32)
-        spans = np.empty((ring, 2), np.int64)
         val = np.empty(w, np.float32)
         near_z = np.empty(w, np.float32)
-        stop = min(end + lag, h)
-        for p in range(max(first - lag, 0), end + lag):
-            if p < stop:  # project row p into the ring (and the z-buffer)
+        # the window, all rows that can meet the chunk's: each row's span and the thermal rows
+        # it can land in at its depths; later[i]: the first thermal row of rows w0 + i on
+        w0 = max(first - lag, 0)
+        w1 = min(end + lag, h)
+        spans = np.empty((w1 - w0, 2), np.int64)
+        tops = np.empty(w1 - w0, np.int64)
+        bottoms = np.empty(w1 - w0, np.int64)
+        for p in range(w0, w1):
+            u0, u1, k0, k1 = _row_span(depth[p], scale, lo[p], hi[p])
+            if build and k1 >= lo.shape[1]:
+                near[k] = 1
+            spans[p - w0, 0] = u0
+            spans[p - w0, 1] = u1
+            tops[p - w0], bottoms[p - w0] = _row_reach(reach[p], k0, k1)
+        later = np.empty(w1 - w0 + 1, np.int64)
+        later[w1 - w0] = _NOWHERE
+        for i in range(w1 - w0 - 1, -1, -1):
+            later[i] = min(later[i + 1], tops[i])
+        # start at the first row above the chunk that can meet it
+        top = tops[first - w0 : end - w0].min()
+        bottom = bottoms[first - w0 : end - w0].max()
+        start = first
+        for p in range(w0, first):
+            if bottoms[p - w0] + gap >= top and tops[p - w0] - gap <= bottom:
+                start = p
+                break
+        v = first  # the next row to sample
+        p = start  # the next row to project
+        while v < end:
+            if p < w1:  # project row p into the ring (and the z-buffer)
                 slot = p % ring
                 uv = slot if bilinear else 0
                 rp = min(p, a0.shape[0] - 1)
-                drow, ar0, ar1, ar2 = depth[p], a0[rp], a1[rp], a2[rp]
+                u0, u1 = spans[p - w0, 0], spans[p - w0, 1]
                 b0, b1, b2 = brow[p, 0], brow[p, 1], brow[p, 2]
-                u0, u1, is_near = _row_span(drow, scale, lo[p], hi[p])
-                if build and is_near:
-                    near[k] = 1
-                spans[slot, 0] = u0
-                spans[slot, 1] = u1
                 # loops over views that start at 0 (see _zbuffer)
-                dr, c0, c1, c2 = drow[u0:u1], ar0[u0:u1], ar1[u0:u1], ar2[u0:u1]
+                dr, c0, c1, c2 = depth[p, u0:u1], a0[rp, u0:u1], a1[rp, u0:u1], a2[rp, u0:u1]
                 ur, vr, zr, ir = ut[uv], vt[uv], zt[slot], idx[slot]
                 if bilinear:  # nearest needs no (u, v): not storing them is 3-4 % faster
                     for u in range(dr.size):
@@ -349,55 +392,58 @@ def _sample(
                         )
                 if build:
                     _scatter_min(ir, zr, zbuf, dr.size)
-            v = p - lag  # sample row v: every row that can reach its thermal pixels is in
-            if v < first:
-                continue
-            slot = v % ring
-            u0, u1 = spans[slot, 0], spans[slot, 1]
-            drow = depth[v]
-            # outside the span: invalid depth, or out of the thermal view
-            _fill_outside(drow[:u0], out[v, :u0], reason[v, :u0])
-            _fill_outside(drow[u1:], out[v, u1:], reason[v, u1:])
-            orow, rrow = out[v, u0:u1], reason[v, u0:u1]
-            zr, ir = zt[slot], idx[slot]
-            n = u1 - u0
-            for u in range(n):
-                j = max(ir[u], np.int32(0))
-                val[u] = values[j]
-                near_z[u] = zbuf[j]
-            for u in range(n):
-                i = ir[u]
-                pz = zr[u]
-                # hidden when the thermal pixel's nearest surface is clearly in front: beyond
-                # the depth noise (sigma ~ z^2) and the spread of a slanted surface in a pixel
-                tol = tol_sigma * pz * pz + tol_slope * pz
-                occluded = (i >= 0) & (pz > near_z[u] + tol)
-                orow[u] = val[u] if (i >= 0) & ~occluded else nan
-                rrow[u] = np.uint8(
-                    np.int32(i == -1) * Reason.INVALID_DEPTH
-                    + np.int32(i == -2) * Reason.OUTSIDE
-                    + np.int32(occluded) * Reason.OCCLUDED
-                )
-            if bilinear:
-                _bilinear_row(
-                    ut[slot][:n],
-                    vt[slot][:n],
-                    zr[:n],
-                    rrow,
-                    orow,
-                    values,
-                    zbuf,
-                    geo,
-                    tol_sigma,
-                    tol_slope,
-                )
-            if want_index:
-                irow = index[v]
-                irow[:u0] = -1
-                irow[u1:] = -1
-                iin = irow[u0:u1]
+                p += 1
+            # sample the rows that no row still to project can reach; past the lag, none can
+            while v < min(p, end) and (
+                p == w1 or p - v > lag or later[p - w0] - gap > bottoms[v - w0]
+            ):
+                slot = v % ring
+                u0, u1 = spans[v - w0, 0], spans[v - w0, 1]
+                drow = depth[v]
+                # outside the span: invalid depth, or out of the thermal view
+                _fill_outside(drow[:u0], out[v, :u0], reason[v, :u0])
+                _fill_outside(drow[u1:], out[v, u1:], reason[v, u1:])
+                orow, rrow = out[v, u0:u1], reason[v, u0:u1]
+                zr, ir = zt[slot], idx[slot]
+                n = u1 - u0
                 for u in range(n):
-                    iin[u] = ir[u] if rrow[u] == Reason.OK else -1
+                    j = max(ir[u], np.int32(0))
+                    val[u] = values[j]
+                    near_z[u] = zbuf[j]
+                for u in range(n):
+                    i = ir[u]
+                    pz = zr[u]
+                    # hidden when the thermal pixel's nearest surface is clearly in front: beyond
+                    # the depth noise (sigma ~ z^2) and the spread of a slanted surface in a pixel
+                    tol = tol_sigma * pz * pz + tol_slope * pz
+                    occluded = (i >= 0) & (pz > near_z[u] + tol)
+                    orow[u] = val[u] if (i >= 0) & ~occluded else nan
+                    rrow[u] = np.uint8(
+                        np.int32(i == -1) * Reason.INVALID_DEPTH
+                        + np.int32(i == -2) * Reason.OUTSIDE
+                        + np.int32(occluded) * Reason.OCCLUDED
+                    )
+                if bilinear:
+                    _bilinear_row(
+                        ut[slot][:n],
+                        vt[slot][:n],
+                        zr[:n],
+                        rrow,
+                        orow,
+                        values,
+                        zbuf,
+                        geo,
+                        tol_sigma,
+                        tol_slope,
+                    )
+                if want_index:
+                    irow = index[v]
+                    irow[:u0] = -1
+                    irow[u1:] = -1
+                    iin = irow[u0:u1]
+                    for u in range(n):
+                        iin[u] = ir[u] if rrow[u] == Reason.OK else -1
+                v += 1
 
 
 @numba.njit(inline="always", **_JIT)
@@ -518,9 +564,9 @@ class Registration:
         self._n_chunks = max(1, numba.get_num_threads())
         self._span_lo = np.empty((calibration.depth.height, _W_SAMPLES), dtype=np.int32)
         self._span_hi = np.empty_like(self._span_lo)
-        reach = np.empty((calibration.depth.height, 2), dtype=np.int32)
-        _view_table(self._scale, *self._rays, self._geo, self._span_lo, self._span_hi, reach)
-        self._lag = _sampling_lag(reach)
+        self._reach = np.empty((*self._span_lo.shape, 2), dtype=np.int32)
+        _view_table(self._scale, *self._rays, self._geo, self._span_lo, self._span_hi, self._reach)
+        self._lag = _sampling_lag(self._reach)
 
     @classmethod
     def from_file(
@@ -644,6 +690,7 @@ class Registration:
                 self._geo,
                 self._span_lo,
                 self._span_hi,
+                self._reach,
                 therm.ravel(),
                 zbuf,
                 build,
