@@ -10,7 +10,7 @@ import pytest
 from bench.peers import near_pixel_border, nearest_index
 
 from thermodepth.calibration import Calibration
-from thermodepth.camera import RigidTransform, rotation_from_euler
+from thermodepth.camera import Intrinsics, RigidTransform, rotation_from_euler
 from thermodepth.evaluation import registration_error
 from thermodepth.registration import Reason, Registration
 from thermodepth.sim import (
@@ -172,6 +172,19 @@ def test_each_row_chunk_builds_all_the_zbuffer_it_samples(n_chunks: int, scene: 
         np.testing.assert_array_equal(alone.reason, given.reason)
         np.testing.assert_array_equal(alone.values, given.values)
         np.testing.assert_array_equal(index, given_index)
+
+
+def test_more_row_chunks_than_rows() -> None:
+    # a depth image of 3 rows on 5 chunks: two of them get no row
+    narrow = Intrinsics(203, 3, 320.0, 320.0, 101.0, 1.0)
+    cal = Calibration(narrow, CAL.thermal, CAL.depth_scale_m, CAL.thermal_from_depth)
+    reg = Registration(cal)
+    reg._n_chunks = 5
+    depth = np.full(narrow.shape, 1500, np.uint16)
+    values, reason = reg.thermal_to_depth(depth, INDEX)
+    np.testing.assert_array_equal(reason, Reason.OK)
+    given = reg.thermal_to_depth(depth, INDEX, nearest=reg.depth_to_thermal(depth))
+    np.testing.assert_array_equal(values, given.values)
 
 
 def test_distortion_guard_refuses_folded_points() -> None:

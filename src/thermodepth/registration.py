@@ -334,6 +334,8 @@ def _sample(
     for k in numba.prange(n_chunks):
         first = k * h // n_chunks
         end = (k + 1) * h // n_chunks
+        if first == end:  # more chunks than rows
+            continue
         zbuf = nearest_z.copy() if build else nearest_z
         n_uv = ring if bilinear else 1
         ut = np.empty((n_uv, w), np.float32)
