@@ -345,7 +345,8 @@ def _sample(
         val = np.empty(w, np.float32)
         near_z = np.empty(w, np.float32)
         # the window, all rows that can meet the chunk's: each row's span and the thermal rows
-        # it can land in at its depths; later[i]: the first thermal row of rows w0 + i on
+        # it can land in at its depths; later[i]: the first thermal row that any row from
+        # w0 + i on can land in
         w0 = max(first - lag, 0)
         w1 = min(end + lag, h)
         spans = np.empty((w1 - w0, 2), np.int64)
