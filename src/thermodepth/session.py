@@ -1,8 +1,8 @@
 """Recording and measuring sessions over a source: opened in order, closed in every case.
 
 :func:`record_session` is what ``thermodepth record`` runs, :func:`run_session` what
-``thermodepth run`` runs. :func:`tee` is the seam for a measuring pipeline that also records
-(``run --record``): it yields the source's FramePairs while a
+``thermodepth run`` runs. A measuring pipeline that also records (``run --record``) iterates
+``source.pairs(recorder.add)``: the source's FramePairs, while a
 :class:`~thermodepth.io.recording.Recorder` stores every event. Both sessions close through
 one routine: the source first (no more frames), then the recording, with the closing
 attributes :func:`closing_attrs` builds (why it stopped, pairing statistics, the source's
@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 
 from .calibration import Calibration
 from .errors import InputError, ThermodepthError
-from .frames import DepthFrame, FramePair, Match, ThermalFrame
+from .frames import DepthFrame, Match, ThermalFrame
 from .io.measurements import MeasurementWriter, jsonable
 from .io.recording import Recorder, RecorderStats, RecordingWriter, check_output
 from .sources.base import DeviceLostError, Source, event_time_s
@@ -162,13 +162,6 @@ def _session(source: Source, result: SessionResult, open_outputs: Callable[[], R
         finally:  # a source that fails to close (a second Ctrl-C) still leaves a closed recording
             if recorder is not None:
                 recorder.close(closing_attrs(result))
-
-
-def tee(source: Source, recorder: Recorder) -> Iterator[FramePair]:
-    """Yield the source's FramePairs while the recorder stores every event (raw stream frames
-    included). The pipeline's ``run --record`` seam; a source without pairs is refused
-    (:meth:`~thermodepth.sources.base.Source.require_pairs`)."""
-    return source.pairs(recorder.add)
 
 
 def record_session(
