@@ -762,7 +762,8 @@ def run(
     )
     try:
         src.require_pairs()
-        pipeline = Pipeline(settings, src.calibration or cal)  # refuses neither
+        # the source's calibration, else the settings'; Pipeline refuses when neither has one
+        pipeline = Pipeline(settings, src.calibration or cal)
         recorded = pipeline_settings(settings_path, settings) if record else None
     except BaseException:
         src.close()
