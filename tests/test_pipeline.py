@@ -333,6 +333,7 @@ def test_run_live_with_record_then_replay_gives_the_same_results(tmp_path: Path)
         ],
     )
     assert replay.exit_code == 0, replay.output
+    assert "calibration" not in live.output + replay.output  # the settings give none
     a = (tmp_path / "live" / "measurements.jsonl").read_text()
     b = (tmp_path / "replay" / "measurements.jsonl").read_text()
     assert a == b and len(a.splitlines()) == 6
@@ -358,6 +359,18 @@ def test_run_stops_cleanly_on_ctrl_c(tmp_path: Path) -> None:
     result = run("sim", None, tmp_path / "r.zarr", None, None, interrupt_after_four)
     assert result.stopped == "interrupted" and result.frames == 4
     assert Recording(tmp_path / "r.zarr").n_pairs == 4  # every fused pair was recorded
+
+
+def test_run_says_when_the_source_keeps_its_own_calibration(tmp_path: Path) -> None:
+    default_calibration().save(tmp_path / "mine.yaml")
+    (tmp_path / "s.yaml").write_text(f"calibration: {tmp_path / 'mine.yaml'}\n")
+    res = runner.invoke(
+        app, ["run", "--settings", str(tmp_path / "s.yaml"), "--frames", "1", "--quiet"]
+    )
+    assert res.exit_code == 0, res.output
+    assert "--source sim: the simulated rig keeps its own calibration; the one given is not" in (
+        " ".join(res.output.split())
+    )
 
 
 def test_run_without_calibration_is_one_line(tmp_path: Path) -> None:
@@ -497,7 +510,9 @@ def test_replay_uses_the_recorded_device_depth_with_the_users_calibration(
     user = Calibration.load(Path(__file__).parents[1] / "examples" / "calibration.yaml")
     device = {**user.to_dict()["depth"], "cx": 641.25, "depth_scale_m": 0.00025}
     record_session(paired_sim(2, device_depth=device), tmp_path / "d.zarr")  # no calibration
-    src = open_source(f"recording:{tmp_path / 'd.zarr'}", user)
+    lines: list[str] = []
+    src = open_source(f"recording:{tmp_path / 'd.zarr'}", user, warn=lines.append)
+    assert lines == []  # the user's calibration is used: nothing to say
     assert src.calibration is not None
     assert src.calibration.depth.cx == 641.25  # the device's ...
     assert src.calibration.depth_scale_m == 0.00025

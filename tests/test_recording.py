@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +68,21 @@ def assert_same_pair(a: FramePair, b: FramePair) -> None:
         assert b.ir is None
     else:
         assert b.ir is not None and np.array_equal(a.ir, b.ir) and b.ir.dtype == np.uint8
+
+
+def test_replay_says_that_its_own_calibration_beats_the_one_given(tmp_path: Path) -> None:
+    out = tmp_path / "s.zarr"
+    rig = sim_rig()
+    record_session(SimSource(rig), out, frames=1)
+    lines: list[str] = []
+    mine = replace(rig.calibration, depth_scale_m=0.0005)
+    src = open_source(f"recording:{out}", mine, warn=lines.append)
+    assert lines == [
+        f"--source recording:{out}: the recording keeps its own calibration; the one given "
+        "is not used"
+    ]
+    assert src.calibration is not None and src.calibration.depth_scale_m == 0.001
+    src.close()
 
 
 def test_record_sim_and_replay_every_field(tmp_path: Path) -> None:

@@ -7,6 +7,7 @@ import re
 import threading
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -18,6 +19,7 @@ from thermodepth.errors import InputError
 from thermodepth.frames import DepthFrame, FfcState, Telemetry, ThermalFrame
 from thermodepth.io.recording import Recording
 from thermodepth.session import record_session
+from thermodepth.sim import default_calibration
 from thermodepth.sources import lepton as lepton_mod
 from thermodepth.sources import open_source, split_spec
 from thermodepth.sources import realsense as realsense_mod
@@ -303,6 +305,21 @@ def test_sim_spec_yields_frame_pairs() -> None:
     pairs = list(src)
     assert len(pairs) == 2
     assert pairs[0].depth.shape == (720, 1280) and pairs[0].thermal.shape == (120, 160)
+
+
+def test_sim_spec_says_once_that_a_given_calibration_is_not_used() -> None:
+    lines: list[str] = []
+    open_source("sim", frames=1, warn=lines.append).close()
+    assert lines == []
+    truth = default_calibration()
+    mine = replace(truth, depth_scale_m=0.0005)
+    src = open_source("sim", mine, frames=1, warn=lines.append)
+    assert lines == [
+        "--source sim: the simulated rig keeps its own calibration; the one given is not used"
+    ]
+    assert src.calibration is not None
+    assert src.calibration.to_dict() == truth.to_dict()  # the rig's truth, not the user's
+    src.close()
 
 
 # -- the Lepton over UVC ----------------------------------------------------------------------

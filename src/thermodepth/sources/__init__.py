@@ -112,6 +112,11 @@ def _open_both(opens: list[Callable[[], Any]], spec: str) -> list[Any]:
     return cameras
 
 
+def _calibration_unused(spec: str, owner: str, warn: Callable[[str], None] | None) -> None:
+    if warn is not None:
+        warn(f"--source {spec}: {owner} keeps its own calibration; the one given is not used")
+
+
 def open_source(
     spec: str,
     calibration: Calibration | None = None,
@@ -132,7 +137,7 @@ def open_source(
     ``realsense+lepton``. with_ir: also read the depth camera's infrared image.
     thermal_latency_s: subtracted from the Lepton's frame arrival times (0: not calibrated;
     see :mod:`.lepton`). warn: where one-line warnings go (a recording's skipped frames, a
-    RealSense stream that restarted).
+    RealSense stream that restarted, a calibration given to a source that keeps its own).
     """
     from .paired import PairedSource, StreamSource
 
@@ -170,13 +175,18 @@ def open_source(
         src = SimSource(frames=frames)
         if with_ir:
             src.rig.with_ir = True
+        if calibration is not None:
+            _calibration_unused(text, "the simulated rig", warn)
         return src
     if kind == "recording":
         if not arg:
             raise InputError("--source: recording:PATH needs a path")
         from .replay import RecordingSource
 
-        return RecordingSource(arg, warn, calibration)
+        replay = RecordingSource(arg, warn, calibration)
+        if calibration is not None and replay.recording.calibration is not None:
+            _calibration_unused(text, "the recording", warn)
+        return replay
     if kind == "realsense":
         cam = _realsense(arg, with_ir, warn)
         return _closing_on_error(
