@@ -321,6 +321,11 @@ def test_cli_fit_compensate_evaluate(tmp_path: Path, train_csv: Path) -> None:
 
     text = runner.invoke(app, ["evaluate", str(model), str(train_csv), "--by-vox"])
     assert text.exit_code == 0 and "Tables 1-5" in text.output and "RMSE" in text.output
+    # every mean prints whole in 80 columns (CliRunner's width, as when piped)
+    for block in report["by_vox"]:
+        for value in block["mean_c_by_vox"].values():
+            assert f"{value:.3f}" in text.output
+    assert "…" not in text.output
 
 
 def test_cli_paper_method_and_preset(tmp_path: Path, train_csv: Path) -> None:

@@ -420,8 +420,7 @@ def evaluate_cmd(
     print_scores(f"{test}: {m.method} model", report["per_distance"], report["overall"])
     if report["flags"] != {"ok": len(table)}:
         console.print(f"flags: {report['flags']}")
-    for block in report.get("by_vox", []):
-        print_by_vox(block)
+    print_by_vox(report.get("by_vox", []))
     for path in report.get("figures", []):
         console.print(f"wrote {path}")
 
@@ -457,16 +456,19 @@ def print_scores(title: str, rows: list[dict[str, Any]], total: dict[str, Any]) 
     )
 
 
-def print_by_vox(block: dict[str, Any]) -> None:
-    cells = block["mean_c_by_vox"]
-    table = Table(
-        title=f"{block['reference_temp_c']:g} C target at {block['distance_m']:g} m: "
-        "mean compensated reading per VOx temperature (Tables 1-5)"
-    )
-    for k in cells:
-        table.add_column(k, justify="right")
-    table.add_row(*(f"{v:.3f}" for v in cells.values()))
-    console.print(table)
+def print_by_vox(blocks: list[dict[str, Any]]) -> None:
+    """Tables 1-5 of the paper: per target temperature, the mean compensated reading with a
+    row per VOx temperature and a column per distance (fits 80 columns, also when piped)."""
+    for temp in dict.fromkeys(b["reference_temp_c"] for b in blocks):
+        group = [b["mean_c_by_vox"] for b in blocks if b["reference_temp_c"] == temp]
+        table = Table(title=f"{temp:g} C target: mean compensated reading, C (Tables 1-5)")
+        table.add_column("VOx C", justify="right")
+        for b in blocks:
+            if b["reference_temp_c"] == temp:
+                table.add_column(f"{b['distance_m']:g} m", justify="right")
+        for vox in dict.fromkeys(k for cells in group for k in cells):
+            table.add_row(vox, *(f"{c[vox]:.3f}" if vox in c else "" for c in group))
+        console.print(table)
 
 
 @app.command("paper-tables")
@@ -683,7 +685,9 @@ def run_cmd(
     frames: Annotated[int | None, typer.Option(help="Stop after this many pairs.")] = None,
     out: Annotated[
         Path | None,
-        typer.Option("-o", "--out", help="Write measurements.jsonl and alarms.jsonl here."),
+        typer.Option(
+            "-o", "--out", help="Write measurements.jsonl, alarms.jsonl and hotspots.csv here."
+        ),
     ] = None,
     max_skew_ms: Annotated[float, typer.Option(help=MAX_SKEW_HELP)] = 20.0,
     thermal_latency_ms: Annotated[float, typer.Option(help=THERMAL_LATENCY_HELP)] = 0.0,
