@@ -46,6 +46,35 @@ def test_bad_calibration_is_one_line_without_traceback(
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.parametrize(
+    ("name", "args"),
+    [
+        ("calib.yaml", ["check-calibration", "{bad}"]),
+        ("sweep.csv", ["fit-compensation", "{bad}", "-o", "{tmp}/m.json"]),
+        ("model.json", ["compensate", "{bad}", "{bad}", "-o", "{tmp}/out.csv"]),
+    ],
+)
+def test_a_file_that_is_not_utf8_is_one_line(tmp_path: Path, name: str, args: list[str]) -> None:
+    bad = tmp_path / name
+    bad.write_bytes(b"distance_m: 1\nnote: caf\xe9\n")
+    result = runner.invoke(app, [a.format(bad=bad, tmp=tmp_path) for a in args])
+    assert result.exit_code == 2
+    assert result.output.strip() == f"error: {bad}: not UTF-8 text (byte 0xe9 at offset 23)"
+
+
+def test_error_lines_print_brackets_as_they_are(tmp_path: Path) -> None:
+    # rich would read "[/red]" as markup (a crash) and "[final]" as a style (eaten)
+    folder = tmp_path / "data[final]"
+    folder.mkdir()
+    sweep = folder / "s.csv"
+    sweep.write_text("distance_m,vox_temp_c,measured_temp_c,reference_temp_c\n1,30,[/red],39\n")
+    result = runner.invoke(app, ["fit-compensation", str(sweep)])
+    assert result.exit_code == 2
+    assert result.output.strip() == (
+        f"error: {sweep}: line 2, column measured_temp_c: not a number: '[/red]'"
+    )
+
+
 def test_temperature_command() -> None:
     result = runner.invoke(app, ["temperature", "8502.1", "--emissivity", "1", "--distance-m", "0"])
     assert result.exit_code == 0, result.output

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .camera import Intrinsics, RigidTransform, is_rotation
-from .errors import InputError
+from .errors import InputError, read_text
 from .radiometry import PlanckConstants
 
 SCHEMA_VERSION = 1
@@ -206,10 +206,7 @@ def describe_validation_error(exc: ValidationError) -> str:
 def read_mapping(path: str | Path) -> Any:
     """Parse a YAML or JSON file; unreadable or malformed files raise a one-line InputError."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    text = read_text(p)
     is_json = p.suffix.lower() == ".json"
     try:
         data = json.loads(text) if is_json else yaml.safe_load(text)

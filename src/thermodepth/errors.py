@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 
 class ThermodepthError(Exception):
     """Base class: bad input or a failed operation, with a one-line message for the user."""
@@ -9,3 +11,18 @@ class ThermodepthError(Exception):
 
 class InputError(ThermodepthError, ValueError):
     """A file, field, row or frame the user gave is not acceptable; the message says which."""
+
+
+def read_text(path: str | Path, encoding: str = "utf-8") -> str:
+    """A text file's content; a file that cannot be read or is not text in ``encoding``
+    raises one InputError line naming it (and the first bad byte's offset)."""
+    p = Path(path)
+    try:
+        return p.read_text(encoding=encoding)
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            f"{p}: not {encoding.upper().removesuffix('-SIG')} text "
+            f"(byte 0x{exc.object[exc.start]:02x} at offset {exc.start})"
+        ) from None

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InputError
+from .errors import InputError, read_text
 
 FloatArray = NDArray[np.float64]
 
@@ -113,10 +113,7 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     Known columns must be numeric; others are kept as text.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise InputError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    text = read_text(p, "utf-8-sig")
     reader = csv.reader(text.splitlines())
     header = next(reader, None)
     if header is None or not any(h.strip() for h in header):
