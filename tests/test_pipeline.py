@@ -250,6 +250,20 @@ def test_calibration_that_does_not_match_the_frames() -> None:
         ),
         ("alarms: [{name: x, above_c: 60, what: pump}]\n", "what='pump' is neither 'hotspot'"),
         (
+            "rois: [{name: r, rect: [720, 420, 560, 300]}]\n",
+            r"rois.0: rect \[720, 420, 560, 300\]: expected u0 < u1 and v0 < v1 \(pixels\)$",
+        ),
+        ("rois: [{name: p, polygon: [[0, 0], [10, 10], [20, 20]]}]\n", "encloses no area$"),
+        (
+            "rois: [{name: d, depth_range_m: [1.5, 1.2]}]\n",
+            r"depth_range_m \[1.5, 1.2\]: expected 0 <= near < far \(metres\)$",
+        ),
+        (
+            "rois: [{name: a, rect: [0, 0, 9, 9]}, {name: a, depth_range_m: [1, 2]}]\n",
+            ": ROI names must differ: 'a' twice$",
+        ),
+        ("alarms: [{name: h, above_c: 60}, {name: h, above_c: 65}]\n", "alarm names must differ"),
+        (
             "registration: {method: magic}\n",
             r"registration.method: choose from \['paper', 'reproject'\] \(got 'magic'\)",
         ),
@@ -261,6 +275,32 @@ def test_bad_settings_are_one_line(tmp_path: Path, text: str, message: str) -> N
     with pytest.raises(InputError, match=message) as info:
         Settings.load(path)
     assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("shape", "inside"),
+    [
+        ("rect: [-100, -100, -10, -10]", False),  # a negative end once meant 'from the far edge'
+        ("rect: [5000, 5000, 6000, 6000]", False),
+        ("polygon: [[5000, 5000], [6000, 5000], [6000, 6000]]", False),
+        ("rect: [-100, -100, 10, 20]", True),  # partly inside: the part inside
+    ],
+)
+def test_an_roi_outside_the_depth_image_is_refused(
+    tmp_path: Path, shape: str, inside: bool
+) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text(f"rois: [{{name: spot, {shape}}}]\n")
+    cal = default_calibration()
+    if inside:
+        pipe = Pipeline(Settings.load(path), cal)
+        assert pipe.rois[0].mask(cal.depth.shape).sum() == 10 * 20
+        return
+    with pytest.raises(InputError) as info:
+        Pipeline(Settings.load(path), cal)
+    assert str(info.value) == (
+        f"{path}: rois.0: 'spot' lies outside the 1280x720 depth image (u 0..1279, v 0..719)"
+    )
 
 
 def test_settings_paths_are_relative_to_the_file(tmp_path: Path, model_path: Path) -> None:

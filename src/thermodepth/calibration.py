@@ -196,7 +196,8 @@ def describe_validation_error(exc: ValidationError) -> str:
         msg = "unknown key"
     else:
         msg = err["msg"].removeprefix("Value error, ")
-        if "input" in err and err["type"] not in ("model_type",):
+        # a whole mapping (a check across its keys) would print the whole file section
+        if "input" in err and err["type"] != "model_type" and not isinstance(err["input"], dict):
             msg += f" (got {err['input']!r})"
     more = len(exc.errors()) - 1
     suffix = f" [and {more} more problem{'s' if more > 1 else ''}]" if more else ""

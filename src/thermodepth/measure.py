@@ -47,7 +47,8 @@ class RectRoi:
 
     def mask(self, shape: tuple[int, int], depth_m: FloatArray | None = None) -> BoolArray:
         m = np.zeros(shape, dtype=bool)
-        m[max(self.v0, 0) : self.v1, max(self.u0, 0) : self.u1] = True
+        # clipped at 0 at both ends: a negative end would count from the far edge
+        m[max(self.v0, 0) : max(self.v1, 0), max(self.u0, 0) : max(self.u1, 0)] = True
         return m
 
 

@@ -27,7 +27,7 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import AfterValidator, Field, ValidationError, model_validator
+from pydantic import AfterValidator, Field, PrivateAttr, ValidationError, model_validator
 
 from .calibration import (
     Calibration,
@@ -126,6 +126,12 @@ class HotspotSettings(StrictSchema):
     min_thermal_px: int = Field(default=1, ge=1)
 
 
+def _polygon_area(vertices: list[tuple[float, float]]) -> float:
+    """Area enclosed by a polygon of (u, v) vertices (shoelace formula), pixels^2."""
+    u, v = np.asarray(vertices, np.float64).T
+    return float(abs(np.dot(u, np.roll(v, -1)) - np.dot(v, np.roll(u, -1))) / 2)
+
+
 class RoiSettings(StrictSchema):
     name: str
     rect: tuple[int, int, int, int] | None = None
@@ -139,6 +145,18 @@ class RoiSettings(StrictSchema):
             raise ValueError(
                 "give exactly one of rect [u0, v0, u1, v1], polygon "
                 "[[u, v], ...] or depth_range_m [near, far]"
+            )
+        if self.rect is not None and not (
+            self.rect[0] < self.rect[2] and self.rect[1] < self.rect[3]
+        ):
+            raise ValueError(f"rect {list(self.rect)}: expected u0 < u1 and v0 < v1 (pixels)")
+        if self.polygon is not None and _polygon_area(self.polygon) == 0:
+            raise ValueError(f"polygon {[list(p) for p in self.polygon]}: encloses no area")
+        if self.depth_range_m is not None and not (
+            0 <= self.depth_range_m[0] < self.depth_range_m[1]
+        ):
+            raise ValueError(
+                f"depth_range_m {list(self.depth_range_m)}: expected 0 <= near < far (metres)"
             )
         return self
 
@@ -169,6 +187,12 @@ class Settings(StrictSchema):
     rois: list[RoiSettings] = Field(default_factory=list)
     alarms: list[AlarmSettings] = Field(default_factory=list)
     fallback_distance_m: float | None = Field(default=None, gt=0)
+    _path: Path | None = PrivateAttr(default=None)  # the file it was loaded from
+
+    @property
+    def where(self) -> str:
+        """The settings file's name for messages (``settings`` when built in code)."""
+        return str(self._path) if self._path else "settings"
 
     @classmethod
     def load(cls, path: str | Path) -> Settings:
@@ -180,15 +204,22 @@ class Settings(StrictSchema):
         except ValidationError as exc:
             raise InputError(f"{p}: {describe_validation_error(exc)}") from None
         base = p.parent
-        return s.model_copy(
+        s = s.model_copy(
             update={
                 "calibration": None if s.calibration is None else base / s.calibration,
                 "compensation": None if s.compensation is None else base / s.compensation,
             }
         )
+        s._path = p
+        return s
 
     @model_validator(mode="after")
     def _alarm_subjects(self) -> Settings:
+        for kind, items in (("ROI", self.rois), ("alarm", self.alarms)):
+            seen = [i.name for i in items]
+            twice = sorted({n for n in seen if seen.count(n) > 1})
+            if twice:
+                raise ValueError(f"{kind} names must differ: {', '.join(map(repr, twice))} twice")
         names = {r.name for r in self.rois}
         for a in self.alarms:
             if a.what != "hotspot" and a.what not in names:
@@ -322,11 +353,17 @@ class Pipeline:
         # fixed shapes on the depth grid: their boxes and masks once, so that each frame
         # gathers from the box only (depth ranges change each frame)
         self._roi_regions: list[tuple[Box, NDArray[np.bool_]] | None] = []
-        for roi in self.rois:
+        for i, roi in enumerate(self.rois):
             if isinstance(roi, DepthRangeRoi):
                 self._roi_regions.append(None)
                 continue
             mask = roi.mask(calibration.depth.shape)
+            if not mask.any():
+                h, w = calibration.depth.shape
+                raise InputError(
+                    f"{s.where}: rois.{i}: {roi.name!r} lies outside the {w}x{h} depth image "
+                    f"(u 0..{w - 1}, v 0..{h - 1})"
+                )
             box = bounding_box(mask)
             self._roi_regions.append((box, mask[box]))
         self.alarms = AlarmTracker(
