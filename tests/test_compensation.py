@@ -375,6 +375,10 @@ def test_cli_paper_tables() -> None:
             "no data rows after the header",
         ),
         (
+            "distance_m,vox_temp_c,measured_temp_c,reference_temp_c,emissivity\n1,30,39,39,0\n",
+            "line 2, column emissivity: 0 is outside 0 < emissivity <= 1",
+        ),
+        (
             "distance_m,vox_temp_c,measured_temp_c,reference_temp_c\n1,30,39,39\n1,31,39,39\n",
             "distance 1 m has 2 distinct VOx temperatures",
         ),

@@ -245,6 +245,12 @@ def test_calibration_that_does_not_match_the_frames() -> None:
         ("radiometry: {emissivity: 1.5}\n", "radiometry.emissivity: Input should be less than"),
         ("hotspots: {threshold_c: hot}\n", "hotspots.threshold_c: Input should be a valid number"),
         (
+            "radiometry: {ambient_temp_c: -300}\n",
+            r"radiometry.ambient_temp_c: Input should be greater than -273.15 \(got -300\)",
+        ),
+        ("alarms: [{name: a, above_c: 1e6}]\n", "alarms.0.above_c: Input should be less than"),
+        ("fallback_distance_m: 1e300\n", "fallback_distance_m: Input should be less than"),
+        (
             "rois: [{name: a, rect: [0, 0, 10, 10], depth_range_m: [1, 2]}]\n",
             "rois.0: give exactly one of",
         ),

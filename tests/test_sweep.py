@@ -14,7 +14,9 @@ from hypothesis import strategies as st
 from thermodepth.errors import InputError
 from thermodepth.sweep import REQUIRED, SweepTable, read_sweep_csv, write_sweep_csv
 
-finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
+# what each required column can hold: distances up to 1000 m, temperatures above 0 K to 5000 C
+distance = st.floats(-1e6, 1000, allow_nan=False, allow_infinity=False)
+temp = st.floats(-273.15, 5000, exclude_min=True)
 # text cells: no separators, quotes or line breaks, and never a number
 words = st.text(alphabet=string.ascii_letters + " _-", min_size=1, max_size=8).filter(
     lambda w: w.strip() and not w.strip().lower().startswith(("inf", "nan"))
@@ -33,7 +35,7 @@ def _tmp(text: str) -> Path:
 
 @settings(max_examples=60, deadline=None)
 @given(
-    st.lists(st.tuples(finite, finite, finite, finite), min_size=1, max_size=20),
+    st.lists(st.tuples(distance, temp, temp, temp), min_size=1, max_size=20),
     st.lists(words, min_size=1, max_size=20),
 )
 def test_write_then_read_round_trips(rows: list[tuple[float, ...]], notes: list[str]) -> None:
@@ -78,6 +80,40 @@ def test_arbitrary_text_gives_a_table_or_one_clear_line(text: str) -> None:
         assert message.startswith(str(path)) and "\n" not in message
     else:
         assert len(table) > 0 and all(np.isfinite(table[c]).all() for c in REQUIRED)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    st.sampled_from(
+        [
+            ("vox_temp_c", st.floats(-1e300, -273.15) | st.floats(5000, 1e300, exclude_min=True)),
+            ("reference_temp_c", st.floats(5000, 1e300, exclude_min=True)),
+            ("distance_m", st.floats(1000, 1e300, exclude_min=True)),
+            (
+                "humidity_pct",
+                st.floats(-1e9, 0, exclude_max=True) | st.floats(100, 1e9, exclude_min=True),
+            ),
+            ("emissivity", st.floats(-10, 0) | st.floats(1, 10, exclude_min=True)),
+            ("n", st.floats(-5, 50).filter(lambda n: n < 1 or not n.is_integer())),
+        ]
+    ).flatmap(lambda c: st.tuples(st.just(c[0]), c[1])),
+    st.integers(0, 3),
+)
+def test_a_value_its_column_cannot_hold_names_its_line(bad: tuple[str, float], row: int) -> None:
+    column, value = bad
+    header = [*REQUIRED, "humidity_pct", "emissivity", "n"]
+    lines = [",".join(header)] + [f"{1 + i},{25 + i},38.5,39,50,0.95,4" for i in range(4)]
+    cells = lines[row + 1].split(",")
+    cells[header.index(column)] = repr(value)
+    lines[row + 1] = ",".join(cells)
+    path = _tmp("\n".join(lines) + "\n")
+    try:
+        read_sweep_csv(path)
+    except InputError as exc:
+        assert str(exc).startswith(f"{path}: line {row + 2}, column {column}: {value!r} is ")
+        assert "\n" not in str(exc)
+    else:
+        raise AssertionError(f"{column} = {value!r} was accepted")
 
 
 def test_replacing_a_column_keeps_one_of_it() -> None:

@@ -54,9 +54,11 @@ from .measure import (
     roi_stats,
 )
 from .radiometry import (
+    MAX_DISTANCE_M,
     PAPER_2022,
     PLANCK_PRESETS,
     RADIOMETRY_METHODS,
+    TEMP_LIMITS_C,
     ObjectParams,
     PlanckConstants,
     RadiometryParams,
@@ -98,10 +100,14 @@ def _one_of(choices: Collection[str]) -> AfterValidator:
     return AfterValidator(check)
 
 
+# a temperature in the settings, C (radiometry.TEMP_LIMITS_C)
+TempC = Annotated[float, Field(gt=TEMP_LIMITS_C[0], le=TEMP_LIMITS_C[1])]
+
+
 class RadiometrySettings(StrictSchema):
     emissivity: float = Field(default=0.95, gt=0, le=1)
-    ambient_temp_c: float = 25.0
-    reflected_temp_c: float | None = None
+    ambient_temp_c: TempC = 25.0
+    reflected_temp_c: TempC | None = None
     humidity_pct: float = Field(default=50.0, ge=0, le=100)
     method: Annotated[str, _one_of(RADIOMETRY_METHODS)] = "flir"
     # None: a radiance compensation model's own constants, else paper2022
@@ -122,7 +128,7 @@ class RegistrationSettings(StrictSchema):
 
 
 class HotspotSettings(StrictSchema):
-    threshold_c: float = 50.0
+    threshold_c: TempC = 50.0
     min_thermal_px: int = Field(default=1, ge=1)
 
 
@@ -171,7 +177,7 @@ class RoiSettings(StrictSchema):
 
 class AlarmSettings(StrictSchema):
     name: str
-    above_c: float
+    above_c: TempC
     for_frames: int = Field(default=1, ge=1)
     what: str = "hotspot"
 
@@ -186,7 +192,7 @@ class Settings(StrictSchema):
     hotspots: HotspotSettings = HotspotSettings()
     rois: list[RoiSettings] = Field(default_factory=list)
     alarms: list[AlarmSettings] = Field(default_factory=list)
-    fallback_distance_m: float | None = Field(default=None, gt=0)
+    fallback_distance_m: float | None = Field(default=None, gt=0, le=MAX_DISTANCE_M)
     _path: Path | None = PrivateAttr(default=None)  # the file it was loaded from
 
     @property

@@ -43,6 +43,12 @@ C1L = 2.0 * PLANCK_H * SPEED_OF_LIGHT**2  # first radiation constant for radianc
 C2 = PLANCK_H * SPEED_OF_LIGHT / BOLTZMANN_K  # second radiation constant, m K
 
 ZERO_C_IN_K = 273.15
+#: Temperatures a file or a setting may give, C (open below, closed above): above absolute
+#: zero, and up to well past what LWIR thermography measures (~2000 C).
+TEMP_LIMITS_C = (-ZERO_C_IN_K, 5000.0)
+#: The farthest distance a file or a setting may give, m: far beyond what a 160x120 thermal
+#: camera resolves; the air's transmission underflows long before 1e300 m.
+MAX_DISTANCE_M = 1000.0
 
 
 def celsius_to_kelvin(temp_c: ArrayLike) -> FloatArray:

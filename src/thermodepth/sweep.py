@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError, read_text
+from .radiometry import MAX_DISTANCE_M, TEMP_LIMITS_C
 
 FloatArray = NDArray[np.float64]
 
@@ -109,8 +110,11 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     """Read and validate a sweep CSV.
 
     Raises :class:`InputError` with one line naming the file and, where it applies, the line
-    and column: an empty file, missing columns (all named), a value that is not a number.
-    Known columns must be numeric; others are kept as text.
+    and column: an empty file, missing columns (all named), a value that is not a number or
+    that its column cannot hold (a temperature at or below absolute zero or above 5000 C, a
+    distance beyond 1000 m, humidity outside 0-100 %, emissivity outside (0, 1], n not a
+    whole number >= 1). Known
+    columns must be numeric; others are kept as text.
     """
     p = Path(path)
     text = read_text(p, "utf-8-sig")
@@ -140,7 +144,11 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
             raise InputError(f"{p}: line {line}: {len(row)} fields, header has {len(header)}")
         for name, cell in zip(header, row, strict=True):
             if name in values:
-                values[name].append(_number(cell, p, line, name))
+                value = _number(cell, p, line, name)
+                why = _out_of_range(name, value)
+                if why:
+                    raise InputError(f"{p}: line {line}, column {name}: {cell.strip()} {why}")
+                values[name].append(value)
             else:
                 extra[name].append(cell)
         lines.append(line)
@@ -155,8 +163,26 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     )
 
 
+def _out_of_range(column: str, value: float) -> str | None:
+    """Why a known column's value cannot be right, or None: what the models' physics takes."""
+    lo, hi = TEMP_LIMITS_C
+    if column.endswith("_temp_c") and not lo < value <= hi:
+        return f"is outside {lo:g} < T <= {hi:g} C"
+    if column == "distance_m" and value > MAX_DISTANCE_M:
+        return f"is beyond {MAX_DISTANCE_M:g} m"
+    if column == "humidity_pct" and not 0 <= value <= 100:
+        return "is outside 0-100 %"
+    if column == "emissivity" and not 0 < value <= 1:
+        return "is outside 0 < emissivity <= 1"
+    if column == "n" and not (value >= 1 and value.is_integer()):
+        return "is not a whole number of readings >= 1"
+    return None
+
+
 def _number(cell: str, path: Path, line: int, column: str) -> float:
     try:
+        if "_" in cell:  # Python's float() reads "1_0" as 10
+            raise ValueError
         value = float(cell)
     except ValueError:
         raise InputError(f"{path}: line {line}, column {column}: not a number: {cell!r}") from None
