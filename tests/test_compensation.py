@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -326,6 +327,34 @@ def test_cli_fit_compensate_evaluate(tmp_path: Path, train_csv: Path) -> None:
         for value in block["mean_c_by_vox"].values():
             assert f"{value:.3f}" in text.output
     assert "…" not in text.output
+
+
+def test_cli_evaluate_prints_strict_json_and_refuses_nothing_to_score(
+    tmp_path: Path, train_csv: Path
+) -> None:
+    model = tmp_path / "m.json"
+    fit = runner.invoke(
+        app, ["fit-compensation", str(train_csv), "--method", "paper", "-o", str(model)]
+    )
+    assert fit.exit_code == 0, fit.output
+    table = read_sweep_csv(train_csv)
+    # a 0 C target: its error of the mean in % has no meaning; null in JSON, no warning
+    frozen = tmp_path / "zero.csv"
+    write_sweep_csv(frozen, table.with_columns(reference_temp_c=np.zeros(len(table))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = runner.invoke(app, ["evaluate", str(model), str(frozen), "--json"])
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.output, parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
+    assert report["per_distance"] and all(
+        r["error_of_mean_pct"] is None for r in report["per_distance"]
+    )
+    # no reading the model can take (its ln(VOx) needs VOx above 0 C): one line, not NaN
+    far = tmp_path / "far.csv"
+    write_sweep_csv(far, table.with_columns(vox_temp_c=np.full(len(table), -5.0)))
+    res = runner.invoke(app, ["evaluate", str(model), str(far)])
+    assert res.exit_code == 2
+    assert res.output.strip().startswith(f"error: {far}: no reading could be compensated (")
 
 
 def test_cli_paper_method_and_preset(tmp_path: Path, train_csv: Path) -> None:

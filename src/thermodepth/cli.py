@@ -56,6 +56,13 @@ def one_line_errors(func: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def print_json(data: Any) -> None:
+    """Strict JSON on stdout (NaN and infinities as null, which other parsers refuse)."""
+    from .io.measurements import jsonable
+
+    print(json.dumps(jsonable(data), indent=2))
+
+
 def _version(value: bool) -> None:
     if value:
         console.print(f"thermodepth {__version__}")
@@ -83,7 +90,7 @@ def check_calibration_cmd(
 
     summary = calibration_summary(Calibration.load(path))
     if as_json:
-        print(json.dumps(summary, indent=2))
+        print_json(summary)
         return
     table = Table(title=f"{path}: valid", show_header=False)
     for key, value in summary.items():
@@ -418,7 +425,7 @@ def evaluate_cmd(
 
         report["figures"] = [str(p) for p in plot_vox_curves(m, table, plot)]
     if as_json:
-        print(json.dumps(report, indent=2))
+        print_json(report)
         return
     print_scores(f"{test}: {m.method} model", report["per_distance"], report["overall"])
     if report["flags"] != {"ok": len(table)}:
@@ -447,7 +454,8 @@ def print_scores(title: str, rows: list[dict[str, Any]], total: dict[str, Any]) 
             f"{r['distance_m']:g}",
             str(r["n"]),
             f"{r['mean_c']:.3f}",
-            f"{r['error_of_mean_pct']:.3f}",
+            # no such percentage of a 0 C target
+            f"{r['error_of_mean_pct']:.3f}" if math.isfinite(r["error_of_mean_pct"]) else "n/a",
             f"{r['rmse_c']:.3f}",
             f"{r['max_abs_error_c']:.3f}",
             f"{r['sd_c']:.3f}",
@@ -484,7 +492,7 @@ def paper_tables_cmd(
 
     report = paper_tables_report()
     if as_json:
-        print(json.dumps(report, indent=2))
+        print_json(report)
         return
     table = Table(title="Lin & Yao 2022, Table 6: published vs recomputed from Tables 1-5")
     for col in (
@@ -528,7 +536,7 @@ def devices_cmd(
 
     found = list_devices()
     if as_json:
-        print(json.dumps(found, indent=2))
+        print_json(found)
         return
     for line in describe_devices(found):
         console.print(line, highlight=False, soft_wrap=True)

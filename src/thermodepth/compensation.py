@@ -705,8 +705,8 @@ def load_model(path: str | Path) -> CompensationModel:
 @dataclass(frozen=True)
 class DistanceScore:
     """The paper's Table 6 figure and the stricter ones for readings at one distance of one
-    target: n, mean compensated (C), |error of the mean| in % of the reference, RMSE, max
-    |error| and SD (C)."""
+    target: n, mean compensated (C), |error of the mean| in % of the reference in C (NaN for
+    a 0 C reference, where it has no meaning), RMSE, max |error| and SD (C)."""
 
     distance_m: float
     reference_temp_c: float
@@ -744,7 +744,7 @@ def score(compensated_c: FloatArray, table: SweepTable) -> list[DistanceScore]:
                 r,
                 int(v.size),
                 float(v.mean()),
-                float(abs(v.mean() - r) / abs(r) * 100),
+                float(abs(v.mean() - r) / abs(r) * 100) if r != 0 else float("nan"),
                 float(np.sqrt(np.mean(e**2))),
                 float(np.abs(e).max()),
                 float(v.std(ddof=1)) if v.size > 1 else 0.0,
@@ -828,6 +828,9 @@ def evaluation_report(
     overall figures, flag counts and, optionally, the Tables 1-5 layout (mean per VOx bin)."""
     comp = apply_to_table(model, table)
     flags = flag_names(comp.flag)
+    if not np.isfinite(comp.temp_c).any():
+        counts = ", ".join(f"{flags.count(f)} {f}" for f in sorted(set(flags)))
+        raise InputError(f"{table.source}: no reading could be compensated ({counts})")
     report: dict[str, Any] = {
         "method": model.method,
         "test": table.source,
