@@ -471,6 +471,62 @@ def test_corrupt_meta_chunk_is_unreadable_not_missing_one_warning(
         Recording(out, warn=lines.append).thermal_frame(3)
 
 
+def test_the_last_meta_chunk_gone_is_one_line_for_all_its_pairs(
+    tmp_path: Path, two_chunks: Path
+) -> None:
+    out = tmp_path / "m.zarr"
+    shutil.copytree(two_chunks, out)
+    (out / "depth" / "meta" / "c" / "1" / "0").unlink()  # rows 256-299: the table now ends at 255
+    lines: list[str] = []
+    src = open_source(f"recording:{out}", warn=lines.append)
+    assert [p.index for p in src] == list(range(256))
+    assert src.counters() == {"replay_skipped": 44}
+    assert lines == [
+        f"{out}: pairs 256-299 skipped: depth frame 256: meta row missing (and alike for the "
+        "43 after)"
+    ]
+
+
+def test_skips_of_different_causes_or_apart_are_told_apart(tmp_path: Path) -> None:
+    out = tmp_path / "s.zarr"
+    small_recording(out, 6)
+    for stream, row in (("depth", 1), ("depth", 2), ("thermal", 3), ("depth", 5)):
+        (out / stream / "image" / "c" / str(row) / "0" / "0").unlink()  # zeros: bad CRC
+    lines: list[str] = []
+    assert [p.index for p in Recording(out, warn=lines.append).pairs()] == [0, 4]
+    assert lines == [
+        f"{out}: pairs 1-2 skipped: depth frame 1: pixels do not match their CRC-32 (and alike "
+        "for the 1 after)",
+        f"{out}: pair 3 skipped: thermal frame 3: pixels do not match their CRC-32",
+        f"{out}: pair 5 skipped: depth frame 5: pixels do not match their CRC-32",
+    ]
+
+
+def test_an_image_array_without_metadata_is_one_line(tmp_path: Path) -> None:
+    out = tmp_path / "j.zarr"
+    small_recording(out, 3)
+    (out / "thermal" / "image" / "zarr.json").unlink()
+    with pytest.raises(InputError) as info:
+        Recording(out)
+    assert str(info.value) == (
+        f"{out}: thermal/image/zarr.json is missing: the 3 thermal frames the recording lists "
+        "cannot be read"
+    )
+
+
+def test_a_recording_whose_pairs_are_gone_says_so(tmp_path: Path) -> None:
+    out = tmp_path / "p.zarr"
+    small_recording(out, 3)
+    shutil.rmtree(out / "pairs")
+    lines: list[str] = []
+    src = open_source(f"recording:{out}", warn=lines.append)
+    assert list(src) == []
+    assert lines == [
+        f"{out}: the pairs table is missing or empty, though the recording holds 3 depth and 3 "
+        "thermal frames: no pair to replay (its frames are intact)"
+    ]
+
+
 def test_replaying_a_recording_with_recorder_drops_warns(tmp_path: Path) -> None:
     out = tmp_path / "d.zarr"
     record_session(SimSource(sim_rig()), out, frames=2)

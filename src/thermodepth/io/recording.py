@@ -32,6 +32,7 @@ import heapq
 import json
 import os
 import queue
+import re
 import threading
 import time
 import warnings
@@ -709,6 +710,19 @@ class Recording:
             len(self._thermal),
             len(self._pairs),
         )
+        for stream, n in (("depth", self.n_depth), ("thermal", self.n_thermal)):
+            if n and f"{stream}/image" not in self._arrays:
+                raise InputError(
+                    f"{self.path}: {stream}/image/zarr.json is missing: the {n} {stream} "
+                    "frames the recording lists cannot be read"
+                )
+        # both cameras and no pair: damage, unless the recorder dropped them (said on replay)
+        if self.n_depth and self.n_thermal and not self.n_pairs and not self.dropped.get("pairs"):
+            self.warn(
+                f"{self.path}: the pairs table is missing or empty, though the recording holds "
+                f"{self.n_depth} depth and {self.n_thermal} thermal frames: no pair to replay "
+                "(its frames are intact)"
+            )
         self.calibration = (
             Calibration.from_dict(attrs["calibration"], source=f"{self.path} (calibration)")
             if attrs.get("calibration")
@@ -780,15 +794,37 @@ class Recording:
         return ThermalFrame(counts, float(meta[0]), int(meta[1]), telemetry_from_row(meta[3:]))
 
     def _readable(self, rows: Iterable[Any], what: str, read: Callable[..., Any]) -> Iterator[Any]:
-        """``read(*row)`` for each row; unreadable ones skipped and counted (one warning line
-        each, or one per table chunk warned about on open)."""
-        for i, row in enumerate(rows):
-            try:
-                yield read(*row)
-            except CorruptFrameError as exc:
-                self.skipped += 1
-                if not exc.reported:
-                    self.warn(f"{self.path}: {what} {i} skipped: {exc}")
+        """``read(*row)`` for each row; unreadable ones skipped and counted: one warning line
+        per run of consecutive rows skipped for the same cause (none for a table chunk
+        warned about on open)."""
+        run: list[Any] = []  # [first, last, cause, first message] of the skips not yet told
+
+        def tell() -> None:
+            if run:
+                first, last, _, message = run
+                rows = f"{what} {first}" if first == last else f"{what}s {first}-{last}"
+                alike = "" if first == last else f" (and alike for the {last - first} after)"
+                self.warn(f"{self.path}: {rows} skipped: {message}{alike}")
+                run.clear()
+
+        try:
+            for i, row in enumerate(rows):
+                try:
+                    item = read(*row)
+                except CorruptFrameError as exc:
+                    self.skipped += 1
+                    if not exc.reported:
+                        cause = re.sub(r"\d+", "#", str(exc))  # the same cause, another frame
+                        if run and run[2] == cause and run[1] == i - 1:
+                            run[1] = i
+                        else:
+                            tell()
+                            run.extend([i, i, cause, str(exc)])
+                    continue
+                tell()
+                yield item
+        finally:  # also when the reader stops early
+            tell()
 
     def matches(self) -> Iterator[Match]:
         """Every recorded pair with its frames, in order; unreadable ones skipped and
