@@ -81,6 +81,24 @@ def test_temperature_command() -> None:
     assert "39.000 C" in result.output
 
 
+def test_temperature_command_says_why_not() -> None:
+    result = runner.invoke(app, ["temperature", "--", "-5", "20000", "8502.1"])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines() == [
+        "-5 counts -> none (invalid, or no signal above the surroundings)",
+        "20000 counts -> none (invalid, or no signal above the surroundings)",
+        "8502.1 counts -> 39.000 C",
+    ]
+    for option, value, message in (
+        ("--ambient-c", "-300", "--ambient-c: -300 is outside -273.15 < T <= 5000 C"),
+        ("--humidity-pct", "150", "--humidity-pct: 150 is outside 0-100 %"),
+        ("--emissivity", "nan", "--emissivity: nan is outside 0 < e <= 1"),
+        ("--distance-m", "-1", "--distance-m: -1 is outside 0-1000 m"),
+    ):
+        result = runner.invoke(app, ["temperature", "8502", option, value])
+        assert result.exit_code == 2 and result.output.strip() == f"error: {message}"
+
+
 def test_counts_to_celsius_applies_emissivity_and_distance() -> None:
     bare = counts_to_celsius([8502.1])[0]
     corrected = counts_to_celsius([8502.1], emissivity=0.95, distance_m=2.0)[0]
@@ -93,7 +111,7 @@ def test_counts_to_celsius_applies_emissivity_and_distance() -> None:
     [
         ({"preset": "nope"}, "--preset"),
         ({"method": "nope"}, "--method"),
-        ({"humidity_pct": 500.0}, "relative_humidity"),
+        ({"humidity_pct": 500.0}, "--humidity-pct: 500 is outside 0-100 %"),
     ],
 )
 def test_counts_to_celsius_bad_options(kwargs: dict[str, object], message: str) -> None:

@@ -130,7 +130,10 @@ def temperature_cmd(
         counts, preset, emissivity, distance_m, ambient_c, reflected_c, humidity_pct, method
     )
     for s, t in zip(counts, temps, strict=True):
-        console.print(f"{s:g} counts -> {t:.3f} C")
+        if math.isfinite(t):
+            console.print(f"{s:g} counts -> {t:.3f} C")
+        else:  # raw_to_kelvin's NaN: invalid counts, or no object signal above the offset
+            console.print(f"{s:g} counts -> none (invalid, or no signal above the surroundings)")
 
 
 def counts_to_celsius(
@@ -145,8 +148,10 @@ def counts_to_celsius(
 ) -> list[float]:
     """Object temperatures (C) of raw counts, parameters given at the edge in C and %."""
     from .radiometry import (
+        MAX_DISTANCE_M,
         PLANCK_PRESETS,
         RADIOMETRY_METHODS,
+        TEMP_LIMITS_C,
         ObjectParams,
         RadiometryParams,
         raw_to_celsius,
@@ -156,6 +161,16 @@ def counts_to_celsius(
         raise InputError(f"--preset: unknown {preset!r}; choose from {sorted(PLANCK_PRESETS)}")
     if method not in RADIOMETRY_METHODS:
         raise InputError(f"--method: unknown {method!r}; choose from {sorted(RADIOMETRY_METHODS)}")
+    lo, hi = TEMP_LIMITS_C
+    for option, value, ok, limits in (
+        ("--emissivity", emissivity, 0 < emissivity <= 1, "0 < e <= 1"),
+        ("--distance-m", distance_m, 0 <= distance_m <= MAX_DISTANCE_M, f"0-{MAX_DISTANCE_M:g} m"),
+        ("--ambient-c", ambient_c, lo < ambient_c <= hi, f"{lo:g} < T <= {hi:g} C"),
+        ("--reflected-c", reflected_c, reflected_c is None or lo < reflected_c <= hi, "as ambient"),
+        ("--humidity-pct", humidity_pct, 0 <= humidity_pct <= 100, "0-100 %"),
+    ):
+        if not ok:
+            raise InputError(f"{option}: {value:g} is outside {limits}")
     try:
         obj = ObjectParams.from_celsius(
             emissivity, distance_m, ambient_c, humidity_pct, reflected_c
