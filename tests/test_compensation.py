@@ -357,6 +357,28 @@ def test_cli_evaluate_prints_strict_json_and_refuses_nothing_to_score(
     assert res.output.strip().startswith(f"error: {far}: no reading could be compensated (")
 
 
+def test_cli_compensate_keeps_the_readings_as_they_were(tmp_path: Path, train_csv: Path) -> None:
+    model = tmp_path / "m.json"
+    fit = runner.invoke(
+        app, ["fit-compensation", str(train_csv), "--method", "paper", "-o", str(model)]
+    )
+    assert fit.exit_code == 0, fit.output
+    rows = [
+        "distance_m,vox_temp_c,measured_temp_c,raw_counts,n,note",
+        "1.23456789,30.123456789,38.98765432,8426.36123,2,a",
+        "0.5,25.0000001,37.4466,8411.28,1,b",
+    ]
+    readings = tmp_path / "r.csv"
+    readings.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "out.csv"
+    res = runner.invoke(app, ["compensate", str(model), str(readings), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    got = out.read_text().splitlines()
+    assert got[0] == rows[0] + ",compensated_temp_c,flag"
+    for want, line in zip(rows[1:], got[1:], strict=True):
+        assert line.startswith(want + ",")  # every reading's cell as written, not rounded
+
+
 def test_cli_paper_method_and_preset(tmp_path: Path, train_csv: Path) -> None:
     out = tmp_path / "p.json"
     res = runner.invoke(

@@ -413,7 +413,10 @@ def compensate_file(model_path: Path, readings: Path, out: Path) -> tuple[int, i
     table = read_sweep_csv(readings, required=("distance_m", "vox_temp_c", "measured_temp_c"))
     result = apply_to_table(model, table)
     flags = flag_names(result.flag)
-    write_sweep_csv(out, table.with_columns(compensated_temp_c=result.temp_c, flag=flags))
+    # digits=None: the readings' values as they came (6 digits would round them)
+    write_sweep_csv(
+        out, table.with_columns(compensated_temp_c=result.temp_c, flag=flags), digits=None
+    )
     return len(table), sum(f != "ok" for f in flags)
 
 

@@ -191,8 +191,10 @@ def _number(cell: str, path: Path, line: int, column: str) -> float:
     return value
 
 
-def write_sweep_csv(path: str | Path, table: SweepTable, digits: int = 6) -> None:
-    """Write a sweep table, columns in :attr:`SweepTable.names` order."""
+def write_sweep_csv(path: str | Path, table: SweepTable, digits: int | None = 6) -> None:
+    """Write a sweep table, columns in :attr:`SweepTable.names` order, numbers to ``digits``
+    significant digits (None: the shortest text that reads back as the same float, so a
+    table read and written again keeps every value)."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     names = table.names
@@ -212,5 +214,10 @@ def write_sweep_csv(path: str | Path, table: SweepTable, digits: int = 6) -> Non
         w.writerows(zip(*cols, strict=True))
 
 
-def _fmt(value: float, digits: int) -> str:
-    return "" if not math.isfinite(value) else f"{value:.{digits}g}"
+def _fmt(value: float, digits: int | None) -> str:
+    if not math.isfinite(value):
+        return ""
+    if digits is None:
+        text = repr(float(value))
+        return text.removesuffix(".0")
+    return f"{value:.{digits}g}"
