@@ -379,6 +379,24 @@ def test_cli_compensate_keeps_the_readings_as_they_were(tmp_path: Path, train_cs
         assert line.startswith(want + ",")  # every reading's cell as written, not rounded
 
 
+def test_cli_fit_says_what_the_sweep_cannot_teach(tmp_path: Path, train_csv: Path) -> None:
+    table = read_sweep_csv(train_csv)
+    one_vox = tmp_path / "one_vox.csv"
+    write_sweep_csv(one_vox, table.with_columns(vox_temp_c=np.full(len(table), 28.0)))
+    res = runner.invoke(app, ["fit-compensation", str(one_vox), "-o", str(tmp_path / "v.json")])
+    assert res.exit_code == 0, res.output
+    assert "fitted over 0.5-2.5 m and VOx 28-28 C; readings beyond are flagged" in res.output
+    assert f"warning: {one_vox}: one VOx temperature (28 C)" in " ".join(res.output.split())
+    one_row = tmp_path / "one_row.csv"
+    write_sweep_csv(one_row, table.select(np.arange(len(table)) == 0))
+    model = tmp_path / "r.json"
+    res = runner.invoke(app, ["fit-compensation", str(one_row), "-o", str(model)])
+    assert res.exit_code == 0, res.output
+    assert "the simplest, as nothing can be held out" in res.output
+    saved = json.loads(model.read_text(), parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
+    assert set(saved["model"]["cv"]["rmse_c"].values()) == {None}
+
+
 def test_cli_paper_method_and_preset(tmp_path: Path, train_csv: Path) -> None:
     out = tmp_path / "p.json"
     res = runner.invoke(

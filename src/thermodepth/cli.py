@@ -357,7 +357,23 @@ def fit_compensation_cmd(
     save_model(model, out)
     console.print(f"wrote {model.method} model to {out}")
     if model.method == "radiance":
-        console.print(f"  degrees chosen by cross-validation: {model.cv.get('degrees')}")
+        cv = model.cv
+        scored = any(v is not None for v in cv.get("rmse_c", {}).values())
+        console.print(
+            f"  degrees chosen by cross-validation: {cv.get('degrees')}"
+            if scored
+            else f"  degrees {cv.get('degrees')}: the simplest, as nothing can be held out "
+            "(one distance and one target)"
+        )
+        (d0, d1), (v0, v1) = model.distance_range_m, model.vox_range_c
+        console.print(
+            f"  fitted over {d0:g}-{d1:g} m and VOx {v0:g}-{v1:g} C; readings beyond are flagged"
+        )
+        if v0 == v1:
+            _warn_line(
+                f"{sweep}: one VOx temperature ({v0:g} C): the model cannot learn how VOx "
+                "moves the readings, and flags readings at any other as vox_outside"
+            )
 
 
 def fit_compensation(

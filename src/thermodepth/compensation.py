@@ -419,7 +419,11 @@ class RadianceModel:
                 "degrees": {"gain": chosen[0], "offset": chosen[1]},
                 "gain_fixed_to_one": fixed_gain,
                 "folds": list(data.folds()),
-                "rmse_c": {f"{g},{h}": round(s, 5) for (g, h), s in scores.items()},
+                # None: not scored (nothing to hold out); the file stays strict JSON
+                "rmse_c": {
+                    f"{g},{h}": round(s, 5) if np.isfinite(s) else None
+                    for (g, h), s in scores.items()
+                },
             },
         )
 
