@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -95,8 +96,8 @@ BAD_CASES = [
         [[1, 0, 0], [0, 1, 0], [0, 0, -1]],
         "thermal_from_depth: rotation is not orthonormal",
     ),
-    ("thermal.fx", -150.0, "thermal.fx: Input should be greater than 0"),
-    ("depth.fy", 0, "depth.fy: Input should be greater than 0"),
+    ("thermal.fx", -150.0, "thermal.fx: Input should be greater than or equal to 1"),
+    ("depth.fy", 0, "depth.fy: Input should be greater than or equal to 1"),
     ("thermal.cx", float("nan"), "thermal.cx: Input should be a finite number"),
     (
         "thermal_from_depth.translation_m",
@@ -145,6 +146,8 @@ def test_rotation_within_tolerance_is_accepted() -> None:
         ("list.yaml", "- 1\n- 2\n", "expected a mapping"),
         ("broken.yaml", "depth: {width: 1280\n", "not valid YAML"),
         ("broken.json", '{"depth": ', "not valid JSON"),
+        ("deep.json", "[" * 100_000 + "]" * 100_000, "nested too deeply to read"),
+        ("big.yaml", "depth: {width: " + "9" * 5000 + "}\n", "not valid YAML: Exceeds the limit"),
     ],
 )
 def test_malformed_files(tmp_path: Path, name: str, content: str, message: str) -> None:
@@ -153,6 +156,46 @@ def test_malformed_files(tmp_path: Path, name: str, content: str, message: str) 
     with pytest.raises(InputError, match=message) as info:
         Calibration.load(path)
     assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("change", "sees"),
+    [
+        (lambda d: None, True),
+        # turned 180 deg about y: the thermal camera looks backwards
+        (
+            lambda d: d["thermal_from_depth"].update(
+                rotation=rotation_from_euler(0, np.pi, 0).tolist()
+            ),
+            False,
+        ),
+        (
+            lambda d: d["thermal_from_depth"].update(translation_m=[40.0, 0.0, 0.0]),
+            False,
+        ),  # mm as m
+        (lambda d: d["thermal"].update(distortion=[1e10, 1e10, 0, 0, 0]), False),
+    ],
+)
+def test_cameras_that_share_no_view_are_refused(
+    tmp_path: Path, change: Callable[[dict[str, Any]], None], sees: bool
+) -> None:
+    data = valid_dict()
+    change(data)
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps(data))
+    view = Calibration.from_dict(data).shared_view()
+    assert list(view) == [0.5, 1.0, 2.0, 5.0]
+    if sees:
+        assert all(0.3 < f < 0.5 for f in view.values())  # a 57 deg camera beside an 89 deg one
+        Calibration.load(path)
+        return
+    assert not any(view.values())
+    with pytest.raises(InputError) as info:
+        Calibration.load(path)
+    assert str(info.value) == (
+        f"{path}: the thermal camera sees none of the depth image at 0.5-5 m: check "
+        "thermal_from_depth (its direction, the translation in metres) and the thermal distortion"
+    )
 
 
 def test_missing_file(tmp_path: Path) -> None:

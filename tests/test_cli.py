@@ -42,7 +42,7 @@ def test_bad_calibration_is_one_line_without_traceback(
     assert proc.stdout == ""
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
-    assert f"{bad}: thermal.fx: Input should be greater than 0" in lines[0]
+    assert f"{bad}: thermal.fx: Input should be greater than or equal to 1" in lines[0]
     assert "Traceback" not in proc.stderr
 
 

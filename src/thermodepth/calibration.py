@@ -12,7 +12,8 @@ depth camera's integer units to metres (0.001 for a D435). ``thermal_from_depth`
 in the depth camera's frame to the thermal camera's frame: p_t = R p_d + t.
 
 A bad file raises :class:`~thermodepth.errors.InputError` with one line naming the file and
-the field, e.g. ``calib.yaml: thermal.fx: must be > 0 (got -150.0)``.
+the field, e.g. ``calib.yaml: thermal.fx: Input should be greater than or equal to 1 (got
+-150.0)``.
 """
 
 from __future__ import annotations
@@ -38,6 +39,9 @@ SCHEMA_VERSION = 1
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
+SHARED_VIEW_M = (0.5, 1.0, 2.0, 5.0)  # distances at which the two cameras must share a view
+
+
 class StrictSchema(BaseModel):
     """Base of every file and settings schema: unknown keys, NaN and infinities refused."""
 
@@ -58,10 +62,11 @@ class PlanckSchema(StrictSchema):
 
 
 class CameraSchema(StrictSchema):
-    width: int = Field(gt=0)
-    height: int = Field(gt=0)
-    fx: Finite = Field(gt=0)
-    fy: Finite = Field(gt=0)
+    width: int = Field(gt=0, le=100_000)
+    height: int = Field(gt=0, le=100_000)
+    # focal lengths in pixels: 1 px is a 179 deg view of a 160 px image, 1e6 px a narrow one
+    fx: Finite = Field(ge=1, le=1e6)
+    fy: Finite = Field(ge=1, le=1e6)
     cx: Finite
     cy: Finite
     distortion: list[Finite] = Field(min_length=5, max_length=5)
@@ -173,8 +178,33 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:
-        """Read and validate a YAML (.yaml/.yml) or JSON (.json) calibration file."""
-        return cls.from_dict(read_mapping(path), source=str(path))
+        """Read and validate a YAML (.yaml/.yml) or JSON (.json) calibration file; one whose
+        cameras see nothing in common (:meth:`shared_view`) is refused too."""
+        cal = cls.from_dict(read_mapping(path), source=str(path))
+        if not any(cal.shared_view().values()):
+            raise InputError(
+                f"{path}: the thermal camera sees none of the depth image at "
+                f"{min(SHARED_VIEW_M):g}-{max(SHARED_VIEW_M):g} m: check thermal_from_depth "
+                "(its direction, the translation in metres) and the thermal distortion"
+            )
+        return cal
+
+    def shared_view(self, distances_m: tuple[float, ...] = ()) -> dict[float, float]:
+        """Fraction of the depth image (a grid of every 16th pixel) whose surface at each
+        distance (Z, metres; default ``SHARED_VIEW_M``) lands in the thermal image."""
+        step = 16
+        u, v = np.meshgrid(
+            np.arange(0, self.depth.width, step, dtype=np.float64),
+            np.arange(0, self.depth.height, step, dtype=np.float64),
+        )
+        pixels = np.stack([u.ravel(), v.ravel()], axis=-1)
+        out = {}
+        for z in distances_m or SHARED_VIEW_M:
+            points = self.thermal_from_depth.apply(self.depth.deproject(pixels, z))
+            with np.errstate(invalid="ignore", over="ignore"):
+                inside = self.thermal.contains(self.thermal.project(points))
+            out[z] = float(inside.mean())
+        return out
 
     def save(self, path: str | Path) -> None:
         """Write YAML or JSON by extension, floats at full precision (round-trips exactly)."""
@@ -211,7 +241,9 @@ def read_mapping(path: str | Path) -> Any:
     is_json = p.suffix.lower() == ".json"
     try:
         data = json.loads(text) if is_json else yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as exc:
+    except RecursionError:
+        raise InputError(f"{p}: nested too deeply to read") from None
+    except (ValueError, yaml.YAMLError) as exc:  # JSONDecodeError; an integer of 5000 digits
         first = str(exc).strip().splitlines()[0]
         raise InputError(f"{p}: not valid {'JSON' if is_json else 'YAML'}: {first}") from None
     if not isinstance(data, dict):

@@ -99,7 +99,8 @@ def check_calibration_cmd(
 
 
 def calibration_summary(cal: Any) -> dict[str, Any]:
-    """Human-sized facts about a calibration: sizes, FOVs, baseline mm, rotation deg."""
+    """Human-sized facts about a calibration: sizes, FOVs, baseline mm, rotation deg, and the
+    % of the depth image the thermal camera sees at 0.5, 1, 2 and 5 m."""
     return {
         "depth": f"{cal.depth.width}x{cal.depth.height}",
         "thermal": f"{cal.thermal.width}x{cal.thermal.height}",
@@ -108,6 +109,9 @@ def calibration_summary(cal: Any) -> dict[str, Any]:
         "depth_scale_m": cal.depth_scale_m,
         "baseline_mm": round(cal.baseline_m * 1000, 3),
         "rotation_deg": round(cal.thermal_from_depth.angle_deg, 4),
+        "shared_view_pct": ", ".join(
+            f"{z:g} m: {100 * f:.0f}" for z, f in cal.shared_view().items()
+        ),
     }
 
 
