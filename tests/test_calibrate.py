@@ -466,6 +466,19 @@ def test_image_formats_load_with_their_values(tmp_path: Path) -> None:
         load_image(tmp_path / "gone.png")
 
 
+def test_a_truncated_image_is_our_one_line_without_opencvs_warning(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    cv2.imwrite(str(tmp_path / "whole.png"), np.arange(64 * 48, dtype=np.uint16).reshape(48, 64))
+    data = (tmp_path / "whole.png").read_bytes()
+    (tmp_path / "cut.png").write_bytes(data[: len(data) // 2])
+    capfd.readouterr()
+    with pytest.raises(InputError, match=r"cut\.png: unreadable"):
+        load_image(tmp_path / "cut.png")
+    assert capfd.readouterr().err == ""  # OpenCV's "PNG input buffer is incomplete" is muted
+    assert cv2.utils.logging.getLogLevel() != cv2.utils.logging.LOG_LEVEL_ERROR  # restored
+
+
 @needs_real
 def test_14_bit_inverted_board_gives_the_same_corners(tmp_path: Path) -> None:
     # an 8-bit photo made into a low-contrast, inverted 14-bit "thermal" image (510 counts of
@@ -639,6 +652,12 @@ def test_cli_bad_board_is_one_line(tmp_path: Path) -> None:
     )
     assert result.exit_code == 2
     assert "--board: expected checkerboard:COLSxROWS" in result.output
+    for size in ("inf", "nan", "0"):
+        result = runner.invoke(app, ["calibrate", str(tmp_path), "--square-m", size])
+        assert result.exit_code == 2, size
+        assert result.output.strip() == (
+            f"error: --square-m: must be a finite length > 0, got {float(size)}"
+        )
 
 
 def test_simulated_pose_generator_keeps_boards_in_both_views() -> None:

@@ -407,6 +407,18 @@ def test_run_stops_cleanly_on_ctrl_c(tmp_path: Path) -> None:
     assert Recording(tmp_path / "r.zarr").n_pairs == 4  # every fused pair was recorded
 
 
+def test_each_frames_measurements_are_on_disk_when_it_ends(tmp_path: Path) -> None:
+    from thermodepth.cli import run
+
+    on_disk = []
+
+    def count_lines(frame: object) -> None:  # what a kill -9 right now would leave
+        on_disk.append(len((tmp_path / "m" / "measurements.jsonl").read_text().splitlines()))
+
+    run("sim", None, None, 3, tmp_path / "m", count_lines)
+    assert on_disk == [1, 2, 3]
+
+
 def test_run_says_when_the_source_keeps_its_own_calibration(tmp_path: Path) -> None:
     default_calibration().save(tmp_path / "mine.yaml")
     (tmp_path / "s.yaml").write_text(f"calibration: {tmp_path / 'mine.yaml'}\n")

@@ -202,7 +202,13 @@ def load_image(path: str | Path) -> NDArray[Any]:
         data = np.frombuffer(p.read_bytes(), dtype=np.uint8)
     except OSError as exc:
         raise InputError(f"{p}: unreadable ({exc.strerror or exc})") from None
-    raw = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    # a truncated file is ours to report, in one line: OpenCV's own warning would be a second
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    try:
+        raw = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    finally:
+        cv2.utils.logging.setLogLevel(level)
     if raw is None or raw.size == 0:
         raise InputError(f"{p}: unreadable (not an image OpenCV can decode)")
     img = np.asarray(raw)

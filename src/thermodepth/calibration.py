@@ -303,8 +303,8 @@ class BoardSpec:
         kind, cols, rows = m.group(1), int(m.group(2)), int(m.group(3))
         if cols < 2 or rows < 2:
             raise InputError(f"--board: need at least 2x2, got {cols}x{rows}")
-        if not spacing_m > 0:
-            raise InputError(f"--square-m: must be > 0, got {spacing_m}")
+        if not 0 < spacing_m < math.inf:
+            raise InputError(f"--square-m: must be a finite length > 0, got {spacing_m}")
         return cls(kind, cols, rows, spacing_m)  # type: ignore[arg-type]
 
     @property

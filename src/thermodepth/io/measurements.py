@@ -79,6 +79,9 @@ class MeasurementWriter:
                     h.flags,
                 ]
             )
+        # whole lines on disk as each frame ends: a killed run keeps every frame it measured
+        for f in (self._frames, self._alarms, self._hot_file):
+            f.flush()
 
     def close(self) -> None:
         for f in (self._frames, self._alarms, self._hot_file):
