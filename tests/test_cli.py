@@ -75,6 +75,31 @@ def test_error_lines_print_brackets_as_they_are(tmp_path: Path) -> None:
     )
 
 
+def test_a_frame_line_names_the_flags_of_its_readings(capsys: pytest.CaptureFixture[str]) -> None:
+    from types import SimpleNamespace
+
+    from thermodepth.cli import print_frame
+    from thermodepth.pipeline import PixelFlag
+
+    spot = SimpleNamespace(
+        max_c=201.9, distance_m=2.05, area_m2=0.5, resolvable=True,
+        flags=int(PixelFlag.VOX_OUTSIDE | PixelFlag.NO_DISTANCE),
+    )  # fmt: skip
+    rois = [SimpleNamespace(name="[pump]", n=10, mean_c=50.0, flags=0)]
+    frame = SimpleNamespace(
+        in_ffc=False, index=3, thermal_time_s=0.34, vox_temp_c=-273.15, hotspots=[spot],
+        rois=rois, events=[{"event": "alarm", "rule": "[hot]", "value_c": 201.9, "above_c": 60,
+                            "for_frames": 1}],
+    )  # fmt: skip
+    print_frame(frame)
+    lines = [" ".join(line.split()) for line in capsys.readouterr().out.splitlines()]
+    assert lines == [
+        "frame 3 t= 0.34 s VOx -273.15 C hottest 201.90 C at 2.05 m (5000.0 cm2) "
+        "[vox_outside, no_distance] [pump] 50.00 C",
+        "ALARM [hot]: 201.9 C (above 60 C for 1 frames)",
+    ]
+
+
 def test_temperature_command() -> None:
     result = runner.invoke(app, ["temperature", "8502.1", "--emissivity", "1", "--distance-m", "0"])
     assert result.exit_code == 0, result.output

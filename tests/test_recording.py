@@ -527,6 +527,21 @@ def test_a_recording_whose_pairs_are_gone_says_so(tmp_path: Path) -> None:
     ]
 
 
+def test_a_frame_that_does_not_fit_the_calibration_names_the_recording(tmp_path: Path) -> None:
+    from thermodepth.cli import run
+
+    out = tmp_path / "tiny.zarr"
+    small_recording(out, 2)  # 3x2 depth frames
+    sim_rig().calibration.save(tmp_path / "cal.yaml")
+    (tmp_path / "s.yaml").write_text("calibration: cal.yaml\n")
+    with pytest.raises(InputError) as info:
+        run(f"recording:{out}", tmp_path / "s.yaml")
+    assert str(info.value) == (
+        f"recording:{out}: frame 0: the depth image is 3x2 but the calibration's depth camera "
+        "is 1280x720"
+    )
+
+
 def test_replaying_a_recording_with_recorder_drops_warns(tmp_path: Path) -> None:
     out = tmp_path / "d.zarr"
     record_session(SimSource(sim_rig()), out, frames=2)

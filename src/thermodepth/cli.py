@@ -834,6 +834,15 @@ def run(
     )
 
 
+def _flag_note(flags: int) -> str:
+    """`` [vox_outside]``: the compensation flags a reading carries (beyond what the model
+    was fitted on: a number to doubt), or nothing when it has none."""
+    from .pipeline import PixelFlag
+
+    names = [f.name.lower() for f in PixelFlag if f and f & flags and f.name]
+    return f" [{', '.join(names)}]" if names else ""
+
+
 def print_frame(fused: Any) -> None:
     """One line per fused frame: time, VOx, the hottest hotspot, ROIs, alarms."""
     if fused.in_ffc:
@@ -850,13 +859,14 @@ def print_frame(fused: Any) -> None:
         parts.append(
             f"hottest {h.max_c:6.2f} C at {h.distance_m:.2f} m "
             f"({h.area_m2 * 1e4:.1f} cm2{'' if h.resolvable else ', too small'})"
+            + _flag_note(h.flags)
         )
-    parts += [f"{r.name} {r.mean_c:.2f} C" for r in fused.rois if r.n]
-    console.print("  ".join(parts), highlight=False, soft_wrap=True)
+    parts += [f"{r.name} {r.mean_c:.2f} C{_flag_note(r.flags)}" for r in fused.rois if r.n]
+    console.print("  ".join(parts), highlight=False, soft_wrap=True, markup=False)
     for e in fused.events:
         style = "bold red" if e["event"] == "alarm" else "green"
         console.print(
-            f"[{style}]{e['event'].upper()} {e['rule']}: {e['value_c']} C "
+            f"[{style}]{e['event'].upper()} {escape(e['rule'])}: {e['value_c']} C "
             f"(above {e['above_c']} C for {e['for_frames']} frames)[/{style}]"
         )
 

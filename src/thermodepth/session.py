@@ -247,7 +247,10 @@ def run_session(
         with _session(source, result, open_outputs) as recorder:
             pairs = source.pairs(recorder.add if recorder else None)
             for pair in pairs:
-                fused = pipeline.process(pair)
+                try:
+                    fused = pipeline.process(pair)
+                except InputError as exc:  # a frame that does not fit: say whose
+                    raise InputError(f"{source.name}: {exc}") from None
                 result.frames += 1
                 result.shutter_frames += fused.in_ffc
                 result.events.extend(fused.events)
