@@ -249,6 +249,14 @@ def test_save_load_round_trip(tmp_path: Path, generalisation, suffix: str) -> No
         (lambda d: d["model"].pop("a"), "model.a: missing"),
         (lambda d: d["model"].update(b=[1.0]), "model: distances_m, a and b must have the same"),
         (lambda d: d["model"].update(reference_temp_c="hot"), "model.reference_temp_c"),
+        (
+            lambda d: d["model"].update(vox_range_c=[40, 10]),
+            r"model.vox_range_c: expected \[low, high\] \(got \[40, 10\]\)$",
+        ),
+        (
+            lambda d: d["model"].update(distances_m=[1, 1, 2]),
+            r"model.distances_m: expected distances > 0 in increasing order \(got \[1, 1, 2\]\)$",
+        ),
     ],
 )
 def test_bad_model_files(tmp_path: Path, edit, message: str) -> None:  # type: ignore[no-untyped-def]
@@ -262,13 +270,26 @@ def test_bad_model_files(tmp_path: Path, edit, message: str) -> None:  # type: i
     assert str(info.value).startswith(str(path)) and "\n" not in str(info.value)
 
 
-def test_radiance_model_file_with_impossible_constants(tmp_path: Path, generalisation) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("planck", {"R": -5.0}, r"model\.planck\.R: Input should be greater than 0"),
+        ("gain", [0.0], r"model\.gain: the gain at the VOx centre \(the first\) must be > 0"),
+        ("temp_range_c", [80.0, 30.0], r"model\.temp_range_c: expected \[low, high\]"),
+    ],
+)
+def test_radiance_model_file_with_impossible_values(  # type: ignore[no-untyped-def]
+    tmp_path: Path, generalisation, field: str, value: object, message: str
+) -> None:
     path = tmp_path / "m.json"
     save_model(generalisation.models["radiance"], path)
     doc = json.loads(path.read_text())
-    doc["model"]["planck"]["R"] = -5.0
+    if isinstance(value, dict):
+        doc["model"][field].update(value)
+    else:
+        doc["model"][field] = value
     path.write_text(json.dumps(doc))
-    with pytest.raises(InputError, match=r"model\.planck\.R: Input should be greater than 0"):
+    with pytest.raises(InputError, match=message):
         load_model(path)
 
 

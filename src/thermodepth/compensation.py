@@ -23,15 +23,16 @@ the distance; both are fitted on a sweep (``thermodepth.sweep``) and saved as ve
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from enum import IntFlag
 from pathlib import Path
-from typing import Any, ClassVar, NamedTuple
+from typing import Annotated, Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import Field, ValidationError
+from pydantic import AfterValidator, Field, ValidationError
 
 from .calibration import (
     PlanckSchema,
@@ -638,12 +639,34 @@ def _pick_reference(table: SweepTable, wanted: float | None) -> float:
     return float(refs[np.isclose(refs, wanted)][0])  # the table's own value
 
 
+def _positive_first(gain: list[float]) -> list[float]:
+    if not gain[0] > 0:
+        raise ValueError("the gain at the VOx centre (the first) must be > 0")
+    return gain
+
+
+def _low_high(pair: list[float]) -> list[float]:
+    if pair[0] > pair[1]:
+        raise ValueError("expected [low, high]")
+    return pair
+
+
+def _increasing_positive(values: list[float]) -> list[float]:
+    if values[0] <= 0 or any(b <= a for a, b in itertools.pairwise(values)):
+        raise ValueError("expected distances > 0 in increasing order")
+    return values
+
+
+# a model's range [low, high] (distances, VOx or target temperatures it was fitted over)
+_Range = Annotated[list[float], Field(min_length=2, max_length=2), AfterValidator(_low_high)]
+
+
 class _PaperSchema(StrictSchema):
-    distances_m: list[float] = Field(min_length=1)
+    distances_m: Annotated[list[float], Field(min_length=1), AfterValidator(_increasing_positive)]
     a: list[float]
     b: list[float]
     reference_temp_c: float
-    vox_range_c: list[float] = Field(min_length=2, max_length=2)
+    vox_range_c: _Range
     note: str = ""
 
 
@@ -655,14 +678,15 @@ class _ConditionsSchema(StrictSchema):
 
 class _RadianceSchema(StrictSchema):
     planck: PlanckSchema
-    gain: list[float] = Field(min_length=1)
+    # the sensor's gain at the VOx centre: a factor near 1, never 0 (compensation divides by it)
+    gain: Annotated[list[float], Field(min_length=1), AfterValidator(_positive_first)]
     offset: list[float] = Field(min_length=1)
     vox_centre_c: float
     vox_scale_c: float = Field(gt=0)
     conditions: _ConditionsSchema
-    distance_range_m: list[float] = Field(min_length=2, max_length=2)
-    vox_range_c: list[float] = Field(min_length=2, max_length=2)
-    temp_range_c: list[float] = Field(min_length=2, max_length=2)
+    distance_range_m: _Range
+    vox_range_c: _Range
+    temp_range_c: _Range
     cv: dict[str, Any] = Field(default_factory=dict)
 
 
