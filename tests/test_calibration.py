@@ -147,6 +147,7 @@ def test_rotation_within_tolerance_is_accepted() -> None:
         ("broken.yaml", "depth: {width: 1280\n", "not valid YAML"),
         ("broken.json", '{"depth": ', "not valid JSON"),
         ("deep.json", "[" * 100_000 + "]" * 100_000, "nested too deeply to read"),
+        ("twice.json", '{"depth": {}, "depth": {}}', "not valid JSON: key 'depth' given twice"),
         ("big.yaml", "depth: {width: " + "9" * 5000 + "}\n", "not valid YAML: Exceeds the limit"),
     ],
 )
@@ -196,6 +197,14 @@ def test_cameras_that_share_no_view_are_refused(
         f"{path}: the thermal camera sees none of the depth image at 0.5-5 m: check "
         "thermal_from_depth (its direction, the translation in metres) and the thermal distortion"
     )
+
+
+def test_another_schema_version_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps({**valid_dict(), "schema_version": 2}))
+    with pytest.raises(InputError) as info:
+        Calibration.load(path)
+    assert str(info.value) == f"{path}: schema_version: Input should be 1 (got 2)"
 
 
 def test_missing_file(tmp_path: Path) -> None:

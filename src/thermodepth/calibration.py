@@ -34,7 +34,7 @@ from .camera import Intrinsics, RigidTransform, is_rotation
 from .errors import InputError, read_text
 from .radiometry import PlanckConstants
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION: Literal[1] = 1
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
@@ -107,7 +107,8 @@ class CalibrationSchema(StrictSchema):
     depth: DepthCameraSchema
     thermal: CameraSchema
     thermal_from_depth: TransformSchema
-    schema_version: int = SCHEMA_VERSION
+    # a file of another version would be read wrongly: refused, as model files are
+    schema_version: Literal[1] = SCHEMA_VERSION
 
 
 def intrinsics_of(cam: CameraSchema) -> Intrinsics:
@@ -234,13 +235,22 @@ def describe_validation_error(exc: ValidationError) -> str:
     return f"{loc}: {msg}{suffix}" if loc else f"{msg}{suffix}"
 
 
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object as a dict; a key given twice raises (json keeps the last, silently)."""
+    keys = [k for k, _ in pairs]
+    twice = sorted({k for k in keys if keys.count(k) > 1})
+    if twice:
+        raise ValueError(f"key {', '.join(map(repr, twice))} given twice")
+    return dict(pairs)
+
+
 def read_mapping(path: str | Path) -> Any:
     """Parse a YAML or JSON file; unreadable or malformed files raise a one-line InputError."""
     p = Path(path)
     text = read_text(p)
     is_json = p.suffix.lower() == ".json"
     try:
-        data = json.loads(text) if is_json else yaml.safe_load(text)
+        data = json.loads(text, object_pairs_hook=_unique_keys) if is_json else yaml.safe_load(text)
     except RecursionError:
         raise InputError(f"{p}: nested too deeply to read") from None
     except (ValueError, yaml.YAMLError) as exc:  # JSONDecodeError; an integer of 5000 digits
