@@ -236,6 +236,9 @@ def test_calibration_that_does_not_match_the_frames() -> None:
         match="frame 7: the depth image is 640x480 but the calibration's depth camera is 1280x720",
     ):
         Pipeline(Settings(), rig.calibration).process(small)
+    kelvin = replace(pair, telemetry=replace(pair.telemetry, tlinear=True))
+    with pytest.raises(InputError, match=r"the thermal pixels are TLinear kelvin, not the raw"):
+        Pipeline(Settings(), rig.calibration).process(kelvin)
 
 
 @pytest.mark.parametrize(

@@ -389,6 +389,12 @@ class Pipeline:
                     f"frame {pair.index}: the {name} image is {img.shape[1]}x{img.shape[0]} "
                     f"but the calibration's {name} camera is {intr.width}x{intr.height}"
                 )
+        if pair.telemetry.tlinear:
+            # a recording of a Lepton 3.5 in TLinear mode: its pixels are kelvin, not counts
+            raise InputError(
+                f"frame {pair.index}: the thermal pixels are TLinear kelvin, not the raw counts "
+                "the radiometry needs (record with TLinear off)"
+            )
 
     def temperatures(
         self, counts: NDArray[np.generic], vox_c: float, distance_m: FloatArray
