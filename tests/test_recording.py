@@ -542,6 +542,24 @@ def test_a_frame_that_does_not_fit_the_calibration_names_the_recording(tmp_path:
     )
 
 
+def test_rerecording_a_replay_keeps_frames_whose_numbering_restarted(tmp_path: Path) -> None:
+    # a depth camera that reconnected numbers its frames from 0 again (pixels = the time)
+    tel = Telemetry(frame_counter=0, fpa_temp_k=300.0, housing_temp_k=float("nan"))
+    live = tmp_path / "live.zarr"
+    with RecordingWriter(live) as w:
+        for i in range(6):
+            d = DepthFrame(np.full((2, 3), i, np.uint16), i / 30, i % 3)
+            t = ThermalFrame(np.full((2, 2), i, np.uint16), i / 30, i, tel)
+            w.add(d)
+            w.add(t)
+            w.add(Match(d, t, pair_of(d, t, i)))
+    again = tmp_path / "again.zarr"
+    record_session(open_source(f"recording:{live}"), again)
+    got = list(Recording(again).pairs())
+    assert [int(p.depth[0, 0]) for p in got] == list(range(6))  # not 0, 1, 2, 0, 1, 2
+    assert Recording(again).n_depth == 6
+
+
 def test_replaying_a_recording_with_recorder_drops_warns(tmp_path: Path) -> None:
     out = tmp_path / "d.zarr"
     record_session(SimSource(sim_rig()), out, frames=2)

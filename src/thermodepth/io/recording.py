@@ -334,8 +334,9 @@ class RecordingWriter:
         self.thermal = _Stream(self.root, "thermal", THERMAL_META)
         self.pairs: _TableWriter | None = None
         self.n_pairs = 0
-        self._depth_rows: OrderedDict[int, int] = OrderedDict()
-        self._thermal_rows: OrderedDict[int, int] = OrderedDict()
+        # rows of recent frames by (index, time): a camera that restarts numbers again from 0
+        self._depth_rows: OrderedDict[tuple[int, float], int] = OrderedDict()
+        self._thermal_rows: OrderedDict[tuple[int, float], int] = OrderedDict()
         self.closed = False
 
     # -- appending -------------------------------------------------------------------------
@@ -347,7 +348,7 @@ class RecordingWriter:
         ir = None if frame.ir is None else np.asarray(frame.ir, dtype=np.uint8)
         meta = [frame.time_s, float(frame.index), float(checksum(depth, ir))]
         row = self.depth.append(frame.index, depth, ir, meta)
-        _remember(self._depth_rows, frame.index, row)
+        _remember(self._depth_rows, (frame.index, frame.time_s), row)
         return row
 
     def add_thermal(self, frame: ThermalFrame) -> int:
@@ -355,7 +356,7 @@ class RecordingWriter:
         counts = np.asarray(frame.counts)
         meta = [frame.time_s, float(frame.index), float(checksum(counts))]
         row = self.thermal.append(frame.index, counts, None, meta + telemetry_row(frame.telemetry))
-        _remember(self._thermal_rows, frame.index, row)
+        _remember(self._thermal_rows, (frame.index, frame.time_s), row)
         return row
 
     @property
@@ -374,10 +375,10 @@ class RecordingWriter:
 
     def add_match(self, match: Match) -> None:
         """Write a pair; its frames are written first unless they already are."""
-        d = self._depth_rows.get(match.depth.index)
+        d = self._depth_rows.get((match.depth.index, match.depth.time_s))
         if d is None:
             d = self.add_depth(match.depth)
-        t = self._thermal_rows.get(match.thermal.index)
+        t = self._thermal_rows.get((match.thermal.index, match.thermal.time_s))
         if t is None:
             t = self.add_thermal(match.thermal)
         self.add_pair_rows(d, t, match.pair.index)
@@ -425,8 +426,10 @@ class RecordingWriter:
         self.close()
 
 
-def _remember(rows: OrderedDict[int, int], index: int, row: int, keep: int = 512) -> None:
-    rows[index] = row
+def _remember(
+    rows: OrderedDict[tuple[int, float], int], key: tuple[int, float], row: int, keep: int = 512
+) -> None:
+    rows[key] = row
     while len(rows) > keep:
         rows.popitem(last=False)
 
