@@ -514,17 +514,20 @@ def test_an_image_array_without_metadata_is_one_line(tmp_path: Path) -> None:
     )
 
 
-def test_a_recording_whose_pairs_are_gone_says_so(tmp_path: Path) -> None:
+def test_a_recording_whose_pairs_are_gone_is_paired_again_by_time(tmp_path: Path) -> None:
     out = tmp_path / "p.zarr"
-    small_recording(out, 3)
+    small_recording(out, 5)  # frames 1/30 s apart, depth and thermal at the same times
+    want = [(p.index, int(p.depth[0, 0]), int(p.thermal[0, 0])) for p in Recording(out).pairs()]
     shutil.rmtree(out / "pairs")
     lines: list[str] = []
     src = open_source(f"recording:{out}", warn=lines.append)
-    assert list(src) == []
+    got = [(p.index, int(p.depth[0, 0]), int(p.thermal[0, 0])) for p in src]
+    assert got == want == [(i, i, i) for i in range(5)]
     assert lines == [
-        f"{out}: the pairs table is missing or empty, though the recording holds 3 depth and 3 "
-        "thermal frames: no pair to replay (its frames are intact)"
+        f"{out}: no pairs table, though it holds 5 depth and 5 thermal frames: paired again by "
+        "time (max skew 20 ms); the pairs may differ from the live run's"
     ]
+    assert src.pairer is not None and src.pairer.stats.pairs == 5  # type: ignore[attr-defined]
 
 
 def test_a_frame_that_does_not_fit_the_calibration_names_the_recording(tmp_path: Path) -> None:

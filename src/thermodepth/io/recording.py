@@ -719,13 +719,6 @@ class Recording:
                     f"{self.path}: {stream}/image/zarr.json is missing: the {n} {stream} "
                     "frames the recording lists cannot be read"
                 )
-        # both cameras and no pair: damage, unless the recorder dropped them (said on replay)
-        if self.n_depth and self.n_thermal and not self.n_pairs and not self.dropped.get("pairs"):
-            self.warn(
-                f"{self.path}: the pairs table is missing or empty, though the recording holds "
-                f"{self.n_depth} depth and {self.n_thermal} thermal frames: no pair to replay "
-                "(its frames are intact)"
-            )
         self.calibration = (
             Calibration.from_dict(attrs["calibration"], source=f"{self.path} (calibration)")
             if attrs.get("calibration")

@@ -7,9 +7,10 @@ from pathlib import Path
 from typing import Any
 
 from ..calibration import Calibration
-from ..frames import StreamEvent
+from ..frames import DepthFrame, Match, StreamEvent
 from ..io.recording import Recording
 from .base import Source, with_device_depth
+from .pairing import DEFAULT_MAX_SKEW_S, StreamPairer
 
 
 class RecordingSource(Source):
@@ -22,7 +23,10 @@ class RecordingSource(Source):
     the recording holds (``device_depth``), or the user's as it is when it holds none.
     A recording whose recorder dropped events (a live run the writer could not keep up with)
     is replayed as recorded, with one warning saying so: its pairs are not all the pairs the
-    live run saw.
+    live run saw. A recording of both cameras whose pairs table is lost (or was never
+    written: the recorder killed before its first pair) has its frames paired again by time,
+    as the live source pairs them (``max_skew_s`` as recorded, else the default), with one
+    warning saying so.
     """
 
     def __init__(
@@ -46,6 +50,16 @@ class RecordingSource(Source):
         if self.recording.n_thermal:
             streams.add("thermal")
         self.streams = frozenset(streams) if self.recording.n_pairs == 0 else self.streams
+        self.pairer: StreamPairer | None = None
+        if self.streams == {"depth", "thermal"} and not self.recording.n_pairs:
+            skew = self.recording.settings.get("max_skew_s", DEFAULT_MAX_SKEW_S)
+            self.pairer = StreamPairer(float(skew))
+            self.pairing = self.pairer.stats
+            self.recording.warn(
+                f"{path}: no pairs table, though it holds {self.recording.n_depth} depth and "
+                f"{self.recording.n_thermal} thermal frames: paired again by time (max skew "
+                f"{1000 * self.pairer.max_skew_s:g} ms); the pairs may differ from the live run's"
+            )
         dropped = self.recording.dropped
         if sum(dropped.values()):
             self.recording.warn(
@@ -64,8 +78,22 @@ class RecordingSource(Source):
     def events(self) -> Iterator[StreamEvent]:
         if self.recording.n_pairs:
             yield from self.recording.matches()
-        else:  # a recording of one camera: its frames
+        elif self.pairer is None:  # a recording of one camera: its frames
             yield from self.recording.frames()
+        else:
+            yield from self._paired_again(self.pairer)
+
+    def _paired_again(self, pairer: StreamPairer) -> Iterator[StreamEvent]:
+        """The frames in time order, each followed by the pairs it completes."""
+        matches: list[Match]
+        for frame in self.recording.frames():
+            yield frame
+            if isinstance(frame, DepthFrame):
+                matches = pairer.add_depth(frame)
+            else:
+                matches = pairer.add_thermal(frame)
+            yield from matches
+        yield from pairer.flush()
 
     def settings(self) -> dict[str, Any]:
         return {"source": self.name, "recorded_settings": self.recording.settings}
