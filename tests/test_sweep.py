@@ -8,6 +8,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -114,6 +115,14 @@ def test_a_value_its_column_cannot_hold_names_its_line(bad: tuple[str, float], r
         assert "\n" not in str(exc)
     else:
         raise AssertionError(f"{column} = {value!r} was accepted")
+
+
+@pytest.mark.parametrize("sep", ["\f", "\v", "\x1c", "\u2028"])
+def test_text_cells_keep_characters_that_str_splitlines_would_break_on(sep: str) -> None:
+    path = _tmp(",".join([*REQUIRED, "note"]) + f"\r\n1,25,38,39,a{sep}b\r\n2,26,38,39,c\r\n")
+    table = read_sweep_csv(path)
+    assert table.extra["note"] == [f"a{sep}b", "c"]
+    assert table.lines is not None and list(table.lines) == [2, 3]
 
 
 def test_replacing_a_column_keeps_one_of_it() -> None:

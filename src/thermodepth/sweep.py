@@ -26,6 +26,7 @@ n                   no        number of readings averaged into the row (default 
 from __future__ import annotations
 
 import csv
+import io
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -118,7 +119,7 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     """
     p = Path(path)
     text = read_text(p, "utf-8-sig")
-    reader = csv.reader(text.splitlines())
+    reader = csv.reader(io.StringIO(text, newline=""))  # not splitlines: a \f is no line end
     header = next(reader, None)
     if header is None or not any(h.strip() for h in header):
         raise InputError(f"{p}: empty file (expected a header with {', '.join(required)})")
