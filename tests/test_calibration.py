@@ -184,7 +184,7 @@ def test_cameras_that_share_no_view_are_refused(
     change(data)
     path = tmp_path / "c.json"
     path.write_text(json.dumps(data))
-    view = Calibration.from_dict(data).shared_view()
+    view = Calibration.from_dict(data).shared_view
     assert list(view) == [0.5, 1.0, 2.0, 5.0]
     if sees:
         assert all(0.3 < f < 0.5 for f in view.values())  # a 57 deg camera beside an 89 deg one

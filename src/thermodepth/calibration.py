@@ -22,6 +22,7 @@ import json
 import math
 import re
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -182,7 +183,7 @@ class Calibration:
         """Read and validate a YAML (.yaml/.yml) or JSON (.json) calibration file; one whose
         cameras see nothing in common (:meth:`shared_view`) is refused too."""
         cal = cls.from_dict(read_mapping(path), source=str(path))
-        if not any(cal.shared_view().values()):
+        if not any(cal.shared_view.values()):
             raise InputError(
                 f"{path}: the thermal camera sees none of the depth image at "
                 f"{min(SHARED_VIEW_M):g}-{max(SHARED_VIEW_M):g} m: check thermal_from_depth "
@@ -190,9 +191,11 @@ class Calibration:
             )
         return cal
 
-    def shared_view(self, distances_m: tuple[float, ...] = ()) -> dict[float, float]:
+    @cached_property
+    def shared_view(self) -> dict[float, float]:
         """Fraction of the depth image (a grid of every 16th pixel) whose surface at each
-        distance (Z, metres; default ``SHARED_VIEW_M``) lands in the thermal image."""
+        distance of ``SHARED_VIEW_M`` (Z, metres) lands in the thermal image; computed once
+        (``load`` checks it, ``check-calibration`` reports it)."""
         step = 16
         u, v = np.meshgrid(
             np.arange(0, self.depth.width, step, dtype=np.float64),
@@ -200,7 +203,7 @@ class Calibration:
         )
         pixels = np.stack([u.ravel(), v.ravel()], axis=-1)
         out = {}
-        for z in distances_m or SHARED_VIEW_M:
+        for z in SHARED_VIEW_M:
             points = self.thermal_from_depth.apply(self.depth.deproject(pixels, z))
             with np.errstate(invalid="ignore", over="ignore"):
                 inside = self.thermal.contains(self.thermal.project(points))

@@ -109,9 +109,7 @@ def calibration_summary(cal: Any) -> dict[str, Any]:
         "depth_scale_m": cal.depth_scale_m,
         "baseline_mm": round(cal.baseline_m * 1000, 3),
         "rotation_deg": round(cal.thermal_from_depth.angle_deg, 4),
-        "shared_view_pct": ", ".join(
-            f"{z:g} m: {100 * f:.0f}" for z, f in cal.shared_view().items()
-        ),
+        "shared_view_pct": ", ".join(f"{z:g} m: {100 * f:.0f}" for z, f in cal.shared_view.items()),
     }
 
 
