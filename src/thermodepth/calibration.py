@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .camera import Intrinsics, RigidTransform, is_rotation
-from .errors import InputError, read_text
+from .errors import InputError, read_text, repeated
 from .radiometry import PlanckConstants
 
 SCHEMA_VERSION: Literal[1] = 1
@@ -240,8 +240,7 @@ def describe_validation_error(exc: ValidationError) -> str:
 
 def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     """A JSON object as a dict; a key given twice raises (json keeps the last, silently)."""
-    keys = [k for k, _ in pairs]
-    twice = sorted({k for k in keys if keys.count(k) > 1})
+    twice = repeated(k for k, _ in pairs)
     if twice:
         raise ValueError(f"key {', '.join(map(repr, twice))} given twice")
     return dict(pairs)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
 
@@ -26,3 +27,9 @@ def read_text(path: str | Path, encoding: str = "utf-8") -> str:
             f"{p}: not {encoding.upper().removesuffix('-SIG')} text "
             f"(byte 0x{exc.object[exc.start]:02x} at offset {exc.start})"
         ) from None
+
+
+def repeated(names: Iterable[str]) -> list[str]:
+    """The names that occur more than once, sorted: what a message says is given twice."""
+    seen = list(names)
+    return sorted({n for n in seen if seen.count(n) > 1})

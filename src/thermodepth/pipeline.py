@@ -37,7 +37,7 @@ from .calibration import (
     read_mapping,
 )
 from .compensation import Flag, PaperModel, RadianceModel, load_model
-from .errors import InputError
+from .errors import InputError, repeated
 from .frames import FramePair
 from .measure import (
     AlarmRule,
@@ -222,8 +222,7 @@ class Settings(StrictSchema):
     @model_validator(mode="after")
     def _alarm_subjects(self) -> Settings:
         for kind, items in (("ROI", self.rois), ("alarm", self.alarms)):
-            seen = [i.name for i in items]
-            twice = sorted({n for n in seen if seen.count(n) > 1})
+            twice = repeated(i.name for i in items)
             if twice:
                 raise ValueError(f"{kind} names must differ: {', '.join(map(repr, twice))} twice")
         names = {r.name for r in self.rois}

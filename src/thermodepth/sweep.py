@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InputError, read_text
+from .errors import InputError, read_text, repeated
 from .radiometry import MAX_DISTANCE_M, TEMP_LIMITS_C
 
 FloatArray = NDArray[np.float64]
@@ -114,8 +114,7 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     and column: an empty file, missing columns (all named), a value that is not a number or
     that its column cannot hold (a temperature at or below absolute zero or above 5000 C, a
     distance beyond 1000 m, humidity outside 0-100 %, emissivity outside (0, 1], n not a
-    whole number >= 1). Known
-    columns must be numeric; others are kept as text.
+    whole number >= 1). Known columns must be numeric; others are kept as text.
     """
     p = Path(path)
     text = read_text(p, "utf-8-sig")
@@ -124,9 +123,9 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     if header is None or not any(h.strip() for h in header):
         raise InputError(f"{p}: empty file (expected a header with {', '.join(required)})")
     header = [h.strip() for h in header]
-    repeated = sorted({h for h in header if header.count(h) > 1})
-    if repeated:
-        raise InputError(f"{p}: header names {', '.join(repeated)} more than once")
+    twice = repeated(header)
+    if twice:
+        raise InputError(f"{p}: header names {', '.join(twice)} more than once")
     missing = [c for c in required if c not in header]
     if missing:
         raise InputError(
