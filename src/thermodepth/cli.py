@@ -835,9 +835,10 @@ def run(
 def _flag_note(flags: int) -> str:
     """`` [vox_outside]``: the compensation flags a reading carries (beyond what the model
     was fitted on: a number to doubt), or nothing when it has none."""
+    from .compensation import names_of
     from .pipeline import PixelFlag
 
-    names = [f.name.lower() for f in PixelFlag if f and f & flags and f.name]
+    names = names_of(flags, PixelFlag)
     return f" [{', '.join(names)}]" if names else ""
 
 

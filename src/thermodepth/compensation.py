@@ -839,13 +839,14 @@ PAPER_TABLE6: dict[float, tuple[float, float]] = {
 }
 
 
+def names_of(value: int, kind: type[IntFlag] = Flag) -> list[str]:
+    """Lower-case names of the flags of ``kind`` set in ``value``, lowest bit first."""
+    return [m.name.lower() for m in kind(value) if m.name]
+
+
 def flag_names(flags: ArrayLike) -> list[str]:
     """Readable flags per reading: ``ok`` or names joined by ``|``."""
-    out = []
-    for f in np.asarray(flags, dtype=np.uint8).ravel():
-        names = [m.name.lower() for m in Flag if m and (int(f) & m) and m.name]
-        out.append("|".join(names) or "ok")
-    return out
+    return ["|".join(names_of(int(f))) or "ok" for f in np.asarray(flags, dtype=np.uint8).ravel()]
 
 
 def evaluation_report(
