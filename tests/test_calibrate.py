@@ -15,6 +15,7 @@ import yaml
 from typer.testing import CliRunner
 
 from conftest import CliProcess
+from thermodepth.board import BoardSpec
 from thermodepth.calibrate import (
     CalibrationResult,
     canonical_order,
@@ -32,7 +33,7 @@ from thermodepth.calibrate import (
     upscale_factor,
     write_report_json,
 )
-from thermodepth.calibration import BoardSpec, Calibration
+from thermodepth.calibration import Calibration
 from thermodepth.camera import RigidTransform
 from thermodepth.cli import app
 from thermodepth.errors import InputError
@@ -263,7 +264,7 @@ def test_depth_intrinsics_of_another_size_are_refused(tmp_path: Path) -> None:
     from thermodepth.camera import Intrinsics
 
     other = Intrinsics(1280, 720, 645.0, 645.0, 639.5, 359.5)
-    with pytest.raises(InputError, match=r"--depth-intrinsics: size 1280x720 .*640x480"):
+    with pytest.raises(InputError, match=r"^depth_intrinsics: size 1280x720 .*640x480"):
         run_calibration(REAL, BOARD_REAL, depth_intrinsics=other)
 
 

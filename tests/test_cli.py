@@ -10,7 +10,9 @@ from typer.testing import CliRunner
 
 from conftest import CliProcess
 from thermodepth import __version__
-from thermodepth.cli import app, counts_to_celsius
+from thermodepth.app.temperature import counts_to_celsius
+from thermodepth.cli import app
+from thermodepth.conditions import Conditions
 from thermodepth.errors import InputError, ThermodepthError
 
 EXAMPLE = Path(__file__).parents[1] / "examples" / "calibration.yaml"
@@ -115,9 +117,9 @@ def test_temperature_command_says_why_not() -> None:
         "8502.1 counts -> 39.000 C",
     ]
     for option, value, message in (
-        ("--ambient-c", "-300", "--ambient-c: -300 is outside -273.15 < T <= 5000 C"),
+        ("--ambient-temp-c", "-300", "--ambient-temp-c: -300 is outside -273.15 < T <= 5000 C"),
         ("--humidity-pct", "150", "--humidity-pct: 150 is outside 0-100 %"),
-        ("--emissivity", "nan", "--emissivity: nan is outside 0 < e <= 1"),
+        ("--emissivity", "nan", "--emissivity: nan is outside 0 < emissivity <= 1"),
         ("--distance-m", "-1", "--distance-m: -1 is outside 0-1000 m"),
     ):
         result = runner.invoke(app, ["temperature", "8502", option, value])
@@ -126,7 +128,7 @@ def test_temperature_command_says_why_not() -> None:
 
 def test_counts_to_celsius_applies_emissivity_and_distance() -> None:
     bare = counts_to_celsius([8502.1])[0]
-    corrected = counts_to_celsius([8502.1], emissivity=0.95, distance_m=2.0)[0]
+    corrected = counts_to_celsius([8502.1], Conditions(emissivity=0.95), distance_m=2.0)[0]
     assert bare == pytest.approx(39.0, abs=1e-3)
     assert corrected > bare + 0.5  # a grey body far away is hotter than its counts suggest
 
@@ -134,21 +136,23 @@ def test_counts_to_celsius_applies_emissivity_and_distance() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"preset": "nope"}, "--preset"),
-        ({"method": "nope"}, "--method"),
-        ({"humidity_pct": 500.0}, "--humidity-pct: 500 is outside 0-100 %"),
+        ({"preset": "nope"}, "preset: unknown 'nope'"),
+        ({"method": "nope"}, "method: unknown 'nope'"),
+        ({"distance_m": -1.0}, "distance_m: -1 is outside 0-1000 m"),
     ],
 )
 def test_counts_to_celsius_bad_options(kwargs: dict[str, object], message: str) -> None:
     with pytest.raises(InputError, match=message):
         counts_to_celsius([8500.0], **kwargs)  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="humidity_pct: 500 is outside 0-100 %"):
+        counts_to_celsius([8500.0], Conditions(humidity_pct=500.0))
 
 
 # -- devices and record ----------------------------------------------------------------------
 
 
 def test_describe_devices_says_clearly_when_nothing_is_attached() -> None:
-    from thermodepth.cli import describe_devices
+    from thermodepth.app.devices import describe_devices
 
     lines = describe_devices(
         {
@@ -210,7 +214,7 @@ def test_record_sim_command(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--source", "sim"], "--source sim never ends: give --frames or --duration"),
+        (["--source", "sim"], "--source: sim never ends: give frames or a duration"),
         (["--source", "sim", "--frames", "0"], "--frames: must be at least 1"),
         (["--source", "sim", "--duration", "-1"], "--duration: must be > 0 seconds"),
         (["--source", "nope", "--frames", "1"], "--source: unknown 'nope'"),

@@ -23,6 +23,7 @@ from thermodepth.compensation import (
     paper_tables_report,
     save_model,
 )
+from thermodepth.conditions import Conditions
 from thermodepth.errors import InputError
 from thermodepth.sim.protocols import SweepConfig, simulate_sweep
 from thermodepth.sweep import SweepTable, read_sweep_csv, write_sweep_csv
@@ -192,9 +193,11 @@ def test_tables_with_per_row_conditions(generalisation) -> None:  # type: ignore
             cols["measured_temp_c"][i],
             cols["vox_temp_c"][i],
             cols["distance_m"][i],
-            ambient_c=cols["ambient_temp_c"][i],
-            humidity_pct=cols["humidity_pct"][i],
-            emissivity=cols["emissivity"][i],
+            Conditions(
+                ambient_temp_c=cols["ambient_temp_c"][i],
+                humidity_pct=cols["humidity_pct"][i],
+                emissivity=cols["emissivity"][i],
+            ),
         )
         assert got[i] == pytest.approx(float(one.temp_c), abs=1e-9)
     # the conditions matter: the same readings at 25 C / 50 % / 0.95 compensate differently
@@ -427,7 +430,7 @@ def test_cli_paper_method_and_preset(tmp_path: Path, train_csv: Path) -> None:
             str(train_csv),
             "--method",
             "paper",
-            "--reference-temp",
+            "--reference-temp-c",
             "35",
             "-o",
             str(out),

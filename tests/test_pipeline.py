@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from thermodepth.calibration import PlanckSchema
 from thermodepth.cli import app
 from thermodepth.compensation import Flag, PaperModel, save_model
 from thermodepth.errors import InputError
@@ -30,6 +29,7 @@ from thermodepth.pipeline import (
     Settings,
 )
 from thermodepth.registration import Reason, Registration
+from thermodepth.schema import PlanckSchema
 from thermodepth.sim import Rig, camera_pose, constant_fpa, default_calibration, plate_scene
 
 runner = CliRunner()
@@ -245,11 +245,14 @@ def test_calibration_that_does_not_match_the_frames() -> None:
     ("text", "message"),
     [
         ("emisivity: 0.9\n", "emisivity: unknown key"),
-        ("radiometry: {emissivity: 1.5}\n", "radiometry.emissivity: Input should be less than"),
+        (
+            "radiometry: {emissivity: 1.5}\n",
+            r"radiometry.emissivity: outside 0 < emissivity <= 1 \(got 1.5\)$",
+        ),
         ("hotspots: {threshold_c: hot}\n", "hotspots.threshold_c: Input should be a valid number"),
         (
             "radiometry: {ambient_temp_c: -300}\n",
-            r"radiometry.ambient_temp_c: Input should be greater than -273.15 \(got -300\)",
+            r"radiometry.ambient_temp_c: outside -273.15 < T <= 5000 C \(got -300\)$",
         ),
         ("alarms: [{name: a, above_c: 1e6}]\n", "alarms.0.above_c: Input should be less than"),
         ("fallback_distance_m: 1e300\n", "fallback_distance_m: Input should be less than"),
@@ -395,8 +398,9 @@ def test_run_live_with_record_then_replay_gives_the_same_results(tmp_path: Path)
 
 
 def test_run_stops_cleanly_on_ctrl_c(tmp_path: Path) -> None:
-    from thermodepth.cli import run
+    from thermodepth.app.run import RunOptions, run
     from thermodepth.io.recording import Recording
+    from thermodepth.sinks import CallbackSink
 
     seen = []
 
@@ -405,20 +409,21 @@ def test_run_stops_cleanly_on_ctrl_c(tmp_path: Path) -> None:
         if len(seen) == 4:
             raise KeyboardInterrupt
 
-    result = run("sim", None, tmp_path / "r.zarr", None, None, interrupt_after_four)
+    result = run(RunOptions(record=tmp_path / "r.zarr"), [CallbackSink(interrupt_after_four)])
     assert result.stopped == "interrupted" and result.frames == 4
     assert Recording(tmp_path / "r.zarr").n_pairs == 4  # every fused pair was recorded
 
 
 def test_each_frames_measurements_are_on_disk_when_it_ends(tmp_path: Path) -> None:
-    from thermodepth.cli import run
+    from thermodepth.app.run import RunOptions, run
+    from thermodepth.sinks import CallbackSink
 
     on_disk = []
 
     def count_lines(frame: object) -> None:  # what a kill -9 right now would leave
         on_disk.append(len((tmp_path / "m" / "measurements.jsonl").read_text().splitlines()))
 
-    run("sim", None, None, 3, tmp_path / "m", count_lines)
+    run(RunOptions(frames=3, out_dir=tmp_path / "m"), [CallbackSink(count_lines)])
     assert on_disk == [1, 2, 3]
 
 
@@ -429,7 +434,7 @@ def test_run_says_when_the_source_keeps_its_own_calibration(tmp_path: Path) -> N
         app, ["run", "--settings", str(tmp_path / "s.yaml"), "--frames", "1", "--quiet"]
     )
     assert res.exit_code == 0, res.output
-    assert "--source sim: the simulated rig keeps its own calibration; the one given is not" in (
+    assert "sim: the simulated rig keeps its own calibration; the one given is not" in (
         " ".join(res.output.split())
     )
 
@@ -508,12 +513,14 @@ def test_run_with_a_single_camera_is_refused_before_recording(tmp_path: Path) ->
 
 def test_run_session_refuses_a_single_camera_and_closes_it(tmp_path: Path) -> None:
     from thermodepth.session import run_session
+    from thermodepth.sinks import RecorderSink
     from thermodepth.sources.paired import StreamSource
 
     camera = SimCamera("depth", 2)
     pipeline = Pipeline(Settings(), default_calibration())
     with pytest.raises(InputError, match="sim-depth: gives depth only"):
-        run_session(StreamSource(camera, "depth"), pipeline, record=tmp_path / "x.zarr")
+        sinks = [RecorderSink(tmp_path / "x.zarr")]
+        run_session(StreamSource(camera, "depth"), pipeline, sinks=sinks)
     assert camera.closed and not (tmp_path / "x.zarr").exists()
 
 

@@ -78,8 +78,7 @@ def test_replay_says_that_its_own_calibration_beats_the_one_given(tmp_path: Path
     mine = replace(rig.calibration, depth_scale_m=0.0005)
     src = open_source(f"recording:{out}", mine, warn=lines.append)
     assert lines == [
-        f"--source recording:{out}: the recording keeps its own calibration; the one given "
-        "is not used"
+        f"recording:{out}: the recording keeps its own calibration; the one given is not used"
     ]
     assert src.calibration is not None and src.calibration.depth_scale_m == 0.001
     src.close()
@@ -531,14 +530,14 @@ def test_a_recording_whose_pairs_are_gone_is_paired_again_by_time(tmp_path: Path
 
 
 def test_a_frame_that_does_not_fit_the_calibration_names_the_recording(tmp_path: Path) -> None:
-    from thermodepth.cli import run
+    from thermodepth.app.run import RunOptions, run
 
     out = tmp_path / "tiny.zarr"
     small_recording(out, 2)  # 3x2 depth frames
     sim_rig().calibration.save(tmp_path / "cal.yaml")
     (tmp_path / "s.yaml").write_text("calibration: cal.yaml\n")
     with pytest.raises(InputError) as info:
-        run(f"recording:{out}", tmp_path / "s.yaml")
+        run(RunOptions(f"recording:{out}", tmp_path / "s.yaml"))
     assert str(info.value) == (
         f"recording:{out}: frame 0: the depth image is 3x2 but the calibration's depth camera "
         "is 1280x720"

@@ -178,8 +178,7 @@ def test_more_row_chunks_than_rows() -> None:
     # a depth image of 3 rows on 5 chunks: two of them get no row
     narrow = Intrinsics(203, 3, 320.0, 320.0, 101.0, 1.0)
     cal = Calibration(narrow, CAL.thermal, CAL.depth_scale_m, CAL.thermal_from_depth)
-    reg = Registration(cal)
-    reg._n_chunks = 5
+    reg = Registration(cal, chunks=5)
     depth = np.full(narrow.shape, 1500, np.uint16)
     values, reason = reg.thermal_to_depth(depth, INDEX)
     np.testing.assert_array_equal(reason, Reason.OK)

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from thermodepth.calibration import BoardSpec, Calibration
+from thermodepth.board import BoardSpec
+from thermodepth.calibration import Calibration
 from thermodepth.camera import RigidTransform
 from thermodepth.frames import FfcState
 from thermodepth.radiometry import (

@@ -247,17 +247,17 @@ def test_paired_source_counters_merge_both_cameras(monkeypatch: pytest.MonkeyPat
 @pytest.mark.parametrize(
     ("spec", "message"),
     [
-        ("webcam", "--source: unknown 'webcam'; expected one of sim, realsense"),
+        ("webcam", "source: unknown 'webcam'; expected one of sim, realsense"),
         (
             "lepton+realsense",
-            "--source: cannot combine 'lepton+realsense'; expected realsense+lepton",
+            "source: cannot combine 'lepton+realsense'; expected realsense+lepton",
         ),
-        ("sim:3", "--source: 'sim' takes no argument"),
-        ("recording:", "--source: recording:PATH needs a path"),
+        ("sim:3", "source: 'sim' takes no argument"),
+        ("recording:", "source: recording:PATH needs a path"),
         ("lepton:abc", "lepton:abc: expected a video device number"),
         (
             "realsense:take.db3+lepton",
-            "--source realsense:take.db3+lepton: a RealSense file cannot be paired with a live "
+            "source: realsense:take.db3+lepton: a RealSense file cannot be paired with a live "
             "Lepton (the file's times are not the live clock)",
         ),
         ("realsense:{tmp}/take+1.db3", "{tmp}/take+1.db3: no such file"),  # '+' in a path
@@ -314,9 +314,7 @@ def test_sim_spec_says_once_that_a_given_calibration_is_not_used() -> None:
     truth = default_calibration()
     mine = replace(truth, depth_scale_m=0.0005)
     src = open_source("sim", mine, frames=1, warn=lines.append)
-    assert lines == [
-        "--source sim: the simulated rig keeps its own calibration; the one given is not used"
-    ]
+    assert lines == ["sim: the simulated rig keeps its own calibration; the one given is not used"]
     assert src.calibration is not None
     assert src.calibration.to_dict() == truth.to_dict()  # the rig's truth, not the user's
     src.close()

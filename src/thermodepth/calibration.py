@@ -18,48 +18,22 @@ the field, e.g. ``calib.yaml: thermal.fx: Input should be greater than or equal 
 
 from __future__ import annotations
 
-import json
 import math
-import re
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
-import yaml
-from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, model_validator
 
 from .camera import Intrinsics, RigidTransform, is_rotation
-from .errors import InputError, read_text, repeated
-from .radiometry import PlanckConstants
+from .errors import InputError
+from .schema import Finite, StrictSchema, read_mapping, validated, write_mapping
 
 SCHEMA_VERSION: Literal[1] = 1
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-
-
 SHARED_VIEW_M = (0.5, 1.0, 2.0, 5.0)  # distances at which the two cameras must share a view
-
-
-class StrictSchema(BaseModel):
-    """Base of every file and settings schema: unknown keys, NaN and infinities refused."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-class PlanckSchema(StrictSchema):
-    """A camera's counts calibration S = O + R / (exp(B / T) - F) as written in files
-    (:class:`~thermodepth.radiometry.PlanckConstants`)."""
-
-    R: float = Field(gt=0)
-    B: float = Field(gt=0)
-    F: float
-    O: float  # noqa: E741 (the paper's and FLIR's name)
-
-    def constants(self) -> PlanckConstants:
-        return PlanckConstants(**self.model_dump())
 
 
 class CameraSchema(StrictSchema):
@@ -151,10 +125,7 @@ class Calibration:
     @classmethod
     def from_dict(cls, data: Any, source: str = "<calibration>") -> Calibration:
         """Validate a mapping against the schema; errors name ``source`` and the field."""
-        try:
-            s = CalibrationSchema.model_validate(data)
-        except ValidationError as exc:
-            raise InputError(f"{source}: {describe_validation_error(exc)}") from None
+        s = validated(CalibrationSchema, data, source)
         return cls(
             depth=intrinsics_of(s.depth),
             thermal=intrinsics_of(s.thermal),
@@ -218,121 +189,3 @@ class Calibration:
     def baseline_m(self) -> float:
         """Distance between the two optical centres, metres."""
         return self.thermal_from_depth.distance_m
-
-
-def describe_validation_error(exc: ValidationError) -> str:
-    """One line for the first error of a pydantic validation: ``field.path: message``."""
-    err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"])
-    if err["type"] == "missing":
-        msg = "missing"
-    elif err["type"] == "extra_forbidden":
-        msg = "unknown key"
-    else:
-        msg = err["msg"].removeprefix("Value error, ")
-        # a whole mapping (a check across its keys) would print the whole file section
-        if "input" in err and err["type"] != "model_type" and not isinstance(err["input"], dict):
-            msg += f" (got {err['input']!r})"
-    more = len(exc.errors()) - 1
-    suffix = f" [and {more} more problem{'s' if more > 1 else ''}]" if more else ""
-    return f"{loc}: {msg}{suffix}" if loc else f"{msg}{suffix}"
-
-
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """A JSON object as a dict; a key given twice raises (json keeps the last, silently)."""
-    twice = repeated(k for k, _ in pairs)
-    if twice:
-        raise ValueError(f"key {', '.join(map(repr, twice))} given twice")
-    return dict(pairs)
-
-
-def read_mapping(path: str | Path) -> Any:
-    """Parse a YAML or JSON file; unreadable or malformed files raise a one-line InputError."""
-    p = Path(path)
-    text = read_text(p)
-    is_json = p.suffix.lower() == ".json"
-    try:
-        data = json.loads(text, object_pairs_hook=_unique_keys) if is_json else yaml.safe_load(text)
-    except RecursionError:
-        raise InputError(f"{p}: nested too deeply to read") from None
-    except (ValueError, yaml.YAMLError) as exc:  # JSONDecodeError; an integer of 5000 digits
-        first = str(exc).strip().splitlines()[0]
-        raise InputError(f"{p}: not valid {'JSON' if is_json else 'YAML'}: {first}") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{p}: expected a mapping of keys at the top level")
-    return data
-
-
-def _plain(value: Any) -> Any:
-    """numpy scalars and arrays, and tuples, as the Python numbers and lists they hold."""
-    if isinstance(value, np.ndarray | np.generic):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return list(value)
-    raise TypeError(f"cannot write a {type(value).__name__}")
-
-
-class _Dumper(yaml.SafeDumper):
-    """YAML's safe dumper, writing numpy values and tuples as plain numbers and lists."""
-
-
-for _kind in (np.ndarray, np.generic, tuple):
-    _Dumper.add_multi_representer(_kind, lambda dumper, v: dumper.represent_data(_plain(v)))
-
-
-def write_mapping(path: str | Path, data: dict[str, Any]) -> None:
-    """Write a mapping as JSON (a name ending in .json) or YAML; numpy values become plain."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    if p.suffix.lower() == ".json":
-        p.write_text(json.dumps(data, indent=2, default=_plain) + "\n", encoding="utf-8")
-    else:
-        p.write_text(yaml.dump(data, Dumper=_Dumper, sort_keys=False), encoding="utf-8")
-
-
-@dataclass(frozen=True)
-class BoardSpec:
-    """A calibration target in OpenCV's terms.
-
-    checkerboard: ``cols`` x ``rows`` inner corners, squares of ``spacing_m``;
-    circles: an asymmetric grid of ``cols`` circles per row and ``rows`` rows, circle ``j`` of
-    row ``i`` at ((2 j + i % 2) s, i s) with s = ``spacing_m`` (OpenCV's squareSize).
-    """
-
-    kind: Literal["checkerboard", "circles"]
-    cols: int
-    rows: int
-    spacing_m: float
-
-    @classmethod
-    def parse(cls, text: str, spacing_m: float) -> BoardSpec:
-        """Parse ``checkerboard:9x6`` or ``circles:4x11``; bad text raises InputError."""
-        m = re.fullmatch(r"(checkerboard|circles):(\d+)x(\d+)", text.strip())
-        if not m:
-            raise InputError(
-                f"--board: expected checkerboard:COLSxROWS or circles:COLSxROWS, got {text!r}"
-            )
-        kind, cols, rows = m.group(1), int(m.group(2)), int(m.group(3))
-        if cols < 2 or rows < 2:
-            raise InputError(f"--board: need at least 2x2, got {cols}x{rows}")
-        if not 0 < spacing_m < math.inf:
-            raise InputError(f"--square-m: must be a finite length > 0, got {spacing_m}")
-        return cls(kind, cols, rows, spacing_m)  # type: ignore[arg-type]
-
-    @property
-    def pattern_size(self) -> tuple[int, int]:
-        return (self.cols, self.rows)
-
-    def object_points_m(self) -> NDArray[np.float64]:
-        """Target points (N, 3) in the board frame, in OpenCV's detection order."""
-        i, j = np.meshgrid(np.arange(self.rows), np.arange(self.cols), indexing="ij")
-        s = self.spacing_m
-        if self.kind == "checkerboard":
-            x, y = j * s, i * s
-        else:
-            x, y = (2 * j + i % 2) * s, i * s
-        pts = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=-1).astype(np.float64)
-        return pts - (pts.max(axis=0) + pts.min(axis=0)) / 2  # centred on the board
-
-    def __str__(self) -> str:
-        return f"{self.kind}:{self.cols}x{self.rows}"

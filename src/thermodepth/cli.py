@@ -1,4 +1,10 @@
-"""The ``thermodepth`` command line: thin typer commands over plain, tested functions."""
+"""The ``thermodepth`` command line: typer signatures and rich printing over the application
+layer (:mod:`thermodepth.app`), which does the work.
+
+Each command parses its options, calls one plain function and prints what it returns. Errors
+are one red line: a :class:`~thermodepth.errors.FieldError` is shown with the option that
+gave the field (``--emissivity: ...``).
+"""
 
 from __future__ import annotations
 
@@ -8,9 +14,8 @@ import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -25,7 +30,14 @@ from rich.progress import (
 from rich.table import Table
 
 from . import __version__
-from .errors import InputError, ThermodepthError
+from .errors import FieldError, ThermodepthError
+
+if TYPE_CHECKING:
+    from .calibrate import CalibrationResult
+    from .conditions import Conditions
+    from .pipeline import FusedFrame
+    from .progress import Progress as Advance
+    from .session import SessionResult
 
 app = typer.Typer(
     name="thermodepth",
@@ -33,27 +45,57 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # click's plain help: wraps at words, no type column for flags
 )
 console = Console()
 err_console = Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
+FLAGS = {
+    "max_skew_s": "--max-skew-ms",
+    "thermal_latency_s": "--thermal-latency-ms",
+    "duration_s": "--duration",
+    "out_dir": "--out",
+    "preset_name": "--preset",
+    "vox_min_c": "--vox-min",
+    "distances_m": "--distances",
+    "sweep": "SWEEP",
+}
+"""The option of each field whose flag is not ``--`` + the field with dashes."""
+
+
+def flag_of(field: str) -> str:
+    """The command-line option that gives ``field``."""
+    return FLAGS.get(field, "--" + field.replace("_", "-"))
+
 
 def one_line_errors(func: F) -> F:
-    """Print a ThermodepthError as one red line on stderr and exit with code 2."""
+    """Print a ThermodepthError as one red line on stderr (a FieldError with its option's
+    name) and exit with code 2."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return func(*args, **kwargs)
+        except FieldError as exc:
+            _error_line(f"{flag_of(exc.field)}: {exc.message}")
         except ThermodepthError as exc:
-            err_console.print(
-                f"[red]error:[/red] {escape(str(exc))}", highlight=False, soft_wrap=True
-            )
-            raise typer.Exit(2) from None
+            _error_line(str(exc))
 
     return wrapper  # type: ignore[return-value]
+
+
+def _error_line(message: str) -> None:
+    err_console.print(f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True)
+    raise typer.Exit(2)
+
+
+def warn_line(message: str) -> None:
+    """A one-line warning on stderr, brackets printed as they are."""
+    err_console.print(
+        f"[yellow]warning:[/yellow] {escape(message)}", highlight=False, soft_wrap=True
+    )
 
 
 def print_json(data: Any) -> None:
@@ -79,6 +121,79 @@ def _main(
     """thermodepth: depth + thermal fusion for true temperature in 3D."""
 
 
+# -- progress ---------------------------------------------------------------------------------
+
+
+class RichReporter:
+    """A :class:`~thermodepth.progress.Reporter` drawing rich progress bars on stderr."""
+
+    @contextmanager
+    def task(self, description: str, total: int | None) -> Iterator[Advance]:
+        with Progress(
+            SpinnerColumn(),
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=err_console,
+        ) as bar:
+            task = bar.add_task(description, total=total)
+
+            def advance(n: int = 1, /, description: str | None = None) -> None:
+                bar.update(task, advance=n, description=description)
+
+            yield advance
+
+
+BARS = RichReporter()
+
+
+# -- shared options ---------------------------------------------------------------------------
+
+Emissivity = Annotated[float, typer.Option(help="Object emissivity (0, 1].")]
+AmbientTempC = Annotated[
+    float, typer.Option(help="Air (and reflected surroundings) temperature, C.")
+]
+ReflectedTempC = Annotated[
+    float | None, typer.Option(help="Reflected apparent temperature, C (default: the air's).")
+]
+HumidityPct = Annotated[float, typer.Option(help="Relative humidity, %.")]
+MaxSkewMs = Annotated[float, typer.Option(help="Pairing: drop pairs further apart in time, ms.")]
+ThermalLatencyMs = Annotated[
+    float,
+    typer.Option(
+        help="Lepton: subtract this from each frame's arrival time, ms (exposure to arrival; "
+        "default 0: not calibrated)."
+    ),
+]
+Board = Annotated[
+    str, typer.Option(help="checkerboard:COLSxROWS (inner corners) or circles:COLSxROWS.")
+]
+
+
+def conditions_of(
+    emissivity: float, ambient_temp_c: float, humidity_pct: float, reflected: float | None = None
+) -> Conditions:
+    """The viewing conditions the options give (FieldError names a bad one)."""
+    from .conditions import Conditions
+
+    return Conditions(emissivity, ambient_temp_c, reflected, humidity_pct)
+
+
+def parse_floats(text: str, field: str) -> list[float]:
+    """Comma-separated numbers of an option (``0.5,1,1.5``); FieldError names the field."""
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise FieldError(field, f"expected comma-separated numbers, got {text!r}") from None
+    if not values:
+        raise FieldError(field, "expected at least one number")
+    return values
+
+
+# -- calibration files ------------------------------------------------------------------------
+
+
 @app.command("check-calibration")
 @one_line_errors
 def check_calibration_cmd(
@@ -86,9 +201,9 @@ def check_calibration_cmd(
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Validate a calibration file and summarise it (sizes, baseline, rotation)."""
-    from .calibration import Calibration
+    from .app.calibrate import check_calibration
 
-    summary = calibration_summary(Calibration.load(path))
+    summary = check_calibration(path)
     if as_json:
         print_json(summary)
         return
@@ -98,39 +213,23 @@ def check_calibration_cmd(
     console.print(table)
 
 
-def calibration_summary(cal: Any) -> dict[str, Any]:
-    """Human-sized facts about a calibration: sizes, FOVs, baseline mm, rotation deg, and the
-    % of the depth image the thermal camera sees at 0.5, 1, 2 and 5 m."""
-    return {
-        "depth": f"{cal.depth.width}x{cal.depth.height}",
-        "thermal": f"{cal.thermal.width}x{cal.thermal.height}",
-        "depth_hfov_deg": round(cal.depth.hfov_deg, 2),
-        "thermal_hfov_deg": round(cal.thermal.hfov_deg, 2),
-        "depth_scale_m": cal.depth_scale_m,
-        "baseline_mm": round(cal.baseline_m * 1000, 3),
-        "rotation_deg": round(cal.thermal_from_depth.angle_deg, 4),
-        "shared_view_pct": ", ".join(f"{z:g} m: {100 * f:.0f}" for z, f in cal.shared_view.items()),
-    }
-
-
 @app.command("temperature")
 @one_line_errors
 def temperature_cmd(
     counts: Annotated[list[float], typer.Argument(help="Raw counts (one or more).")],
     preset: Annotated[str, typer.Option(help="Planck constants preset.")] = "paper2022",
-    emissivity: Annotated[float, typer.Option(help="Object emissivity (0, 1].")] = 1.0,
+    emissivity: Emissivity = 1.0,
     distance_m: Annotated[float, typer.Option(help="Object distance, metres.")] = 0.0,
-    ambient_c: Annotated[float, typer.Option(help="Air temperature, C.")] = 25.0,
-    reflected_c: Annotated[
-        float | None, typer.Option(help="Reflected apparent temperature, C (default: ambient).")
-    ] = None,
-    humidity_pct: Annotated[float, typer.Option(help="Relative humidity, percent.")] = 50.0,
+    ambient_temp_c: AmbientTempC = 25.0,
+    reflected_temp_c: ReflectedTempC = None,
+    humidity_pct: HumidityPct = 50.0,
     method: Annotated[str, typer.Option(help="Radiometric model: flir or thermimage.")] = "flir",
 ) -> None:
     """Convert raw counts to object temperature (C) with emissivity and atmosphere."""
-    temps = counts_to_celsius(
-        counts, preset, emissivity, distance_m, ambient_c, reflected_c, humidity_pct, method
-    )
+    from .app.temperature import counts_to_celsius
+
+    conditions = conditions_of(emissivity, ambient_temp_c, humidity_pct, reflected_temp_c)
+    temps = counts_to_celsius(counts, conditions, distance_m, preset, method)
     for s, t in zip(counts, temps, strict=True):
         if math.isfinite(t):
             console.print(f"{s:g} counts -> {t:.3f} C")
@@ -138,88 +237,14 @@ def temperature_cmd(
             console.print(f"{s:g} counts -> none (invalid, or no signal above the surroundings)")
 
 
-def counts_to_celsius(
-    counts: list[float],
-    preset: str = "paper2022",
-    emissivity: float = 1.0,
-    distance_m: float = 0.0,
-    ambient_c: float = 25.0,
-    reflected_c: float | None = None,
-    humidity_pct: float = 50.0,
-    method: str = "flir",
-) -> list[float]:
-    """Object temperatures (C) of raw counts, parameters given at the edge in C and %."""
-    from .radiometry import (
-        MAX_DISTANCE_M,
-        PLANCK_PRESETS,
-        RADIOMETRY_METHODS,
-        TEMP_LIMITS_C,
-        ObjectParams,
-        RadiometryParams,
-        raw_to_celsius,
-    )
-
-    if preset not in PLANCK_PRESETS:
-        raise InputError(f"--preset: unknown {preset!r}; choose from {sorted(PLANCK_PRESETS)}")
-    if method not in RADIOMETRY_METHODS:
-        raise InputError(f"--method: unknown {method!r}; choose from {sorted(RADIOMETRY_METHODS)}")
-    lo, hi = TEMP_LIMITS_C
-    for option, value, ok, limits in (
-        ("--emissivity", emissivity, 0 < emissivity <= 1, "0 < e <= 1"),
-        ("--distance-m", distance_m, 0 <= distance_m <= MAX_DISTANCE_M, f"0-{MAX_DISTANCE_M:g} m"),
-        ("--ambient-c", ambient_c, lo < ambient_c <= hi, f"{lo:g} < T <= {hi:g} C"),
-        ("--reflected-c", reflected_c, reflected_c is None or lo < reflected_c <= hi, "as ambient"),
-        ("--humidity-pct", humidity_pct, 0 <= humidity_pct <= 100, "0-100 %"),
-    ):
-        if not ok:
-            raise InputError(f"{option}: {value:g} is outside {limits}")
-    try:
-        obj = ObjectParams.from_celsius(
-            emissivity, distance_m, ambient_c, humidity_pct, reflected_c
-        )
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
-    params = RadiometryParams(planck=PLANCK_PRESETS[preset], obj=obj)
-    return [float(t) for t in raw_to_celsius(np.asarray(counts), params, method)]
-
-
 # -- simulate -------------------------------------------------------------------------------
 
 simulate_app = typer.Typer(
-    help="Simulate the D435 + Lepton 3 rig (sweeps, frames, targets).", no_args_is_help=True
+    help="Simulate the D435 + Lepton 3 rig (sweeps, frames, targets).",
+    no_args_is_help=True,
+    rich_markup_mode=None,
 )
 app.add_typer(simulate_app, name="simulate")
-
-
-def parse_floats(text: str, option: str) -> list[float]:
-    """Comma-separated numbers of an option (``0.5,1,1.5``); InputError names the option."""
-    try:
-        values = [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise InputError(f"{option}: expected comma-separated numbers, got {text!r}") from None
-    if not values:
-        raise InputError(f"{option}: expected at least one number")
-    return values
-
-
-def _progress() -> Progress:
-    """The commands' rich progress bar, on stderr."""
-    return Progress(
-        SpinnerColumn(),
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-    )
-
-
-@contextmanager
-def progress_bar(description: str, total: int | None) -> Iterator[Callable[[int], None]]:
-    """A rich progress bar (``total`` None: no known end); yields ``advance(n)``."""
-    with _progress() as bar:
-        task = bar.add_task(description, total=total)
-        yield lambda n: bar.advance(task, n)
 
 
 @simulate_app.command("sweep")
@@ -235,46 +260,29 @@ def simulate_sweep_cmd(
     ] = 6000,
     vox_min: Annotated[float, typer.Option(help="Lowest VOx (FPA) temperature, C.")] = 25.0,
     vox_max: Annotated[float, typer.Option(help="Highest VOx (FPA) temperature, C.")] = 40.0,
-    ambient_c: Annotated[float, typer.Option(help="Ambient temperature, C.")] = 25.0,
-    humidity_pct: Annotated[float, typer.Option(help="Relative humidity, %.")] = 50.0,
+    ambient_temp_c: AmbientTempC = 25.0,
+    humidity_pct: HumidityPct = 50.0,
     by_vox: Annotated[
         bool, typer.Option("--by-vox", help="Average per 1 C of VOx (Tables 1-5).")
     ] = False,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
     """The paper's protocol: plate-centre ROI readings vs distance and VOx temperature."""
+    from .app.simulate import sweep
     from .sim.protocols import SweepConfig
-    from .sweep import write_sweep_csv
 
     config = SweepConfig(
-        tuple(parse_floats(distances, "--distances")),
-        tuple(parse_floats(plate_temps, "--plate-temps")),
+        tuple(parse_floats(distances, "distances_m")),
+        tuple(parse_floats(plate_temps, "plate_temps")),
         vox_min,
         vox_max,
         samples,
-        ambient_c,
+        ambient_temp_c,
         humidity_pct,
         seed=seed,
     )
-    table = run_sweep(config, by_vox)
-    write_sweep_csv(out, table)
+    table = sweep(config, out, by_vox, BARS)
     console.print(f"wrote {len(table)} rows to {out}")
-
-
-def run_sweep(config: Any, by_vox: bool = False) -> Any:
-    """Simulate a sweep with a progress bar; validate the config first (InputError)."""
-    from .sim.protocols import aggregate_by_vox, simulate_sweep
-
-    if config.samples < 1:
-        raise InputError("--samples: must be at least 1")
-    if not config.vox_min_c < config.vox_max_c:
-        raise InputError("--vox-min must be below --vox-max")
-    if min(config.distances_m) <= 0:
-        raise InputError("--distances: must be positive")
-    total = len(config.distances_m) * len(config.plate_temps_c)
-    with progress_bar("sweep", total) as advance:
-        table = simulate_sweep(config, progress=advance)
-    return aggregate_by_vox(table) if by_vox else table
 
 
 @simulate_app.command("frames")
@@ -289,12 +297,9 @@ def simulate_frames_cmd(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
     """Frame pairs with ground truth (npz per frame) and the rig's calibration."""
-    from .sim.protocols import SCENES, write_frames
+    from .app.simulate import frames as write_frames
 
-    if scene not in SCENES:
-        raise InputError(f"--scene: unknown {scene!r}; choose from {sorted(SCENES)}")
-    with progress_bar("frames", frames) as advance:
-        paths = write_frames(out, SCENES[scene](), distance_m, frames, seed, advance)
+    paths = write_frames(out, scene, distance_m, frames, seed, BARS)
     console.print(f"wrote {len(paths)} frames and calibration.yaml to {out}")
 
 
@@ -302,20 +307,15 @@ def simulate_frames_cmd(
 @one_line_errors
 def simulate_targets_cmd(
     out: Annotated[Path, typer.Option("-o", "--out", help="Directory to write.")],
-    board: Annotated[
-        str, typer.Option(help="checkerboard:COLSxROWS (inner corners) or circles:COLSxROWS.")
-    ] = "checkerboard:9x6",
+    board: Board = "checkerboard:9x6",
     square_m: Annotated[float, typer.Option(help="Square size (circle grid step), m.")] = 0.03,
     poses: Annotated[int, typer.Option(help="Number of board poses.")] = 20,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
     """Heated-board captures (IR + thermal per pose) for `thermodepth calibrate`."""
-    from .calibration import BoardSpec
-    from .sim.protocols import simulate_targets
+    from .app.simulate import targets
 
-    spec = BoardSpec.parse(board, square_m)
-    with progress_bar("targets", poses) as advance:
-        caps = simulate_targets(out, spec, poses, seed, progress=advance)
+    caps = targets(out, board, square_m, poses, seed, BARS)
     console.print(f"wrote {len(caps.pairs)} pairs and {caps.calibration_path.name} to {out}")
 
 
@@ -326,21 +326,23 @@ def simulate_targets_cmd(
 @one_line_errors
 def fit_compensation_cmd(
     sweep: Annotated[Path | None, typer.Argument(help="Sweep CSV (see README).")] = None,
-    out: Annotated[Path, typer.Option("-o", "--out", help="Model JSON to write.")] = Path(
-        "model.json"
-    ),
-    method: Annotated[str, typer.Option(help="radiance (ours, default) or paper.")] = "radiance",
+    out: Annotated[
+        Path, typer.Option("-o", "--out", help="Model file to write (.json, .yaml).")
+    ] = Path("model.json"),
+    method: Annotated[
+        str, typer.Option(help="radiance (ours, default), paper, or none (physics only).")
+    ] = "radiance",
     preset: Annotated[
         str | None,
         typer.Option(help="Write a published model instead of fitting: paper2022 (eq. 20)."),
     ] = None,
-    reference_temp: Annotated[
+    reference_temp_c: Annotated[
         float | None,
         typer.Option(
             help="paper: the reference temperature (C) to fit at (default 39 if present)."
         ),
     ] = None,
-    ambient_c: Annotated[
+    ambient_temp_c: Annotated[
         float, typer.Option(help="Air temperature (C) for rows without ambient_temp_c.")
     ] = 25.0,
     humidity_pct: Annotated[
@@ -351,64 +353,21 @@ def fit_compensation_cmd(
     ] = 0.95,
 ) -> None:
     """Fit a distance + VOx compensation model on a sweep (or write a published preset)."""
-    from .compensation import save_model
+    from .app.compensation import fit_compensation
 
-    model = fit_compensation(
-        sweep, method, preset, reference_temp, ambient_c, humidity_pct, emissivity
-    )
-    save_model(model, out)
-    console.print(f"wrote {model.method} model to {out}")
-    if model.method == "radiance":
-        cv = model.cv
-        scored = any(v is not None for v in cv.get("rmse_c", {}).values())
-        console.print(
-            f"  degrees chosen by cross-validation: {cv.get('degrees')}"
-            if scored
-            else f"  degrees {cv.get('degrees')}: the simplest, as nothing can be held out "
-            "(one distance and one target)"
-        )
-        (d0, d1), (v0, v1) = model.distance_range_m, model.vox_range_c
-        console.print(
-            f"  fitted over {d0:g}-{d1:g} m and VOx {v0:g}-{v1:g} C; readings beyond are flagged"
-        )
-        if v0 == v1:
-            _warn_line(
-                f"{sweep}: one VOx temperature ({v0:g} C): the model cannot learn how VOx "
-                "moves the readings, and flags readings at any other as vox_outside"
-            )
-
-
-def fit_compensation(
-    sweep: Path | None,
-    method: str = "radiance",
-    preset: str | None = None,
-    reference_temp: float | None = None,
-    ambient_c: float = 25.0,
-    humidity_pct: float = 50.0,
-    emissivity: float = 0.95,
-) -> Any:
-    """A fitted (or preset) compensation model; bad input raises InputError."""
-    from .compensation import PRESETS, Conditions, fit
-    from .sweep import read_sweep_csv
-
-    if preset is not None:
-        if preset not in PRESETS:
-            raise InputError(f"--preset: unknown {preset!r}; choose from {sorted(PRESETS)}")
-        return PRESETS[preset]()
-    if sweep is None:
-        raise InputError("give a sweep CSV to fit, or --preset")
-    if not (0 < emissivity <= 1 and 0 <= humidity_pct <= 100):
-        raise InputError("--emissivity must be in (0, 1] and --humidity-pct in [0, 100]")
-    table = read_sweep_csv(sweep)
-    if method == "paper":
-        return fit(table, "paper", reference_temp_c=reference_temp)
-    return fit(table, method, conditions=Conditions(ambient_c, humidity_pct, emissivity))
+    conditions = conditions_of(emissivity, ambient_temp_c, humidity_pct)
+    fitted = fit_compensation(sweep, out, method, preset, reference_temp_c, conditions)
+    console.print(f"wrote {fitted.model.method} model to {out}")
+    for line in fitted.notes:
+        console.print(f"  {line}", highlight=False)
+    for line in fitted.warnings:
+        warn_line(line)
 
 
 @app.command("compensate")
 @one_line_errors
 def compensate_cmd(
-    model: Annotated[Path, typer.Argument(help="Model JSON (fit-compensation).")],
+    model: Annotated[Path, typer.Argument(help="Model file (fit-compensation).")],
     readings: Annotated[
         Path,
         typer.Argument(
@@ -418,30 +377,16 @@ def compensate_cmd(
     out: Annotated[Path, typer.Option("-o", "--out", help="CSV to write.")],
 ) -> None:
     """Add compensated_temp_c and flag columns to a readings CSV."""
+    from .app.compensation import compensate_file
+
     n, flagged = compensate_file(model, readings, out)
     console.print(f"wrote {n} rows to {out} ({flagged} flagged)")
-
-
-def compensate_file(model_path: Path, readings: Path, out: Path) -> tuple[int, int]:
-    """Compensate every row of ``readings`` into ``out``; returns (rows, rows flagged)."""
-    from .compensation import apply_to_table, flag_names, load_model
-    from .sweep import read_sweep_csv, write_sweep_csv
-
-    model = load_model(model_path)
-    table = read_sweep_csv(readings, required=("distance_m", "vox_temp_c", "measured_temp_c"))
-    result = apply_to_table(model, table)
-    flags = flag_names(result.flag)
-    # digits=None: the readings' values as they came (6 digits would round them)
-    write_sweep_csv(
-        out, table.with_columns(compensated_temp_c=result.temp_c, flag=flags), digits=None
-    )
-    return len(table), sum(f != "ok" for f in flags)
 
 
 @app.command("evaluate")
 @one_line_errors
 def evaluate_cmd(
-    model: Annotated[Path, typer.Argument(help="Model JSON (fit-compensation).")],
+    model: Annotated[Path, typer.Argument(help="Model file (fit-compensation).")],
     test: Annotated[Path, typer.Argument(help="Test sweep CSV with reference_temp_c.")],
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object on stdout.")] = False,
     by_vox: Annotated[
@@ -450,21 +395,14 @@ def evaluate_cmd(
     plot: Annotated[Path | None, typer.Option(help="Write Figs. 13 and 14 (PNG) here.")] = None,
 ) -> None:
     """Score a model on a test sweep: the paper's Table 6 metric and RMSE, max |error|, SD."""
-    from .compensation import evaluation_report, load_model
-    from .sweep import read_sweep_csv
+    from .app.compensation import evaluate
 
-    m = load_model(model)
-    table = read_sweep_csv(test)
-    report = evaluation_report(m, table, 1.0 if by_vox else None)
-    if plot is not None:
-        from .figures import plot_vox_curves
-
-        report["figures"] = [str(p) for p in plot_vox_curves(m, table, plot)]
+    report = evaluate(model, test, by_vox, plot)
     if as_json:
         print_json(report)
         return
-    print_scores(f"{test}: {m.method} model", report["per_distance"], report["overall"])
-    if report["flags"] != {"ok": len(table)}:
+    print_scores(f"{test}: {report['method']} model", report["per_distance"], report["overall"])
+    if set(report["flags"]) != {"ok"}:
         console.print(f"flags: {report['flags']}")
     print_by_vox(report.get("by_vox", []))
     for path in report.get("figures", []):
@@ -472,6 +410,7 @@ def evaluate_cmd(
 
 
 def print_scores(title: str, rows: list[dict[str, Any]], total: dict[str, Any]) -> None:
+    """A table per target and distance: the paper's Table 6 figure and the stricter ones."""
     table = Table(title=title)
     for col in (
         "target C",
@@ -524,9 +463,9 @@ def paper_tables_cmd(
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object on stdout.")] = False,
 ) -> None:
     """The paper's Tables 1-5 recomputed into Table 6, with the figures the paper omits."""
-    from .compensation import paper_tables_report
+    from .app.compensation import paper_tables
 
-    report = paper_tables_report()
+    report = paper_tables()
     if as_json:
         print_json(report)
         return
@@ -568,7 +507,7 @@ def devices_cmd(
     as_json: Annotated[bool, typer.Option("--json", help="Print as JSON.")] = False,
 ) -> None:
     """List attached RealSense cameras and PureThermal (Lepton) boards."""
-    from .sources import list_devices
+    from .app.devices import describe_devices, list_devices
 
     found = list_devices()
     if as_json:
@@ -576,54 +515,6 @@ def devices_cmd(
         return
     for line in describe_devices(found):
         console.print(line, highlight=False, soft_wrap=True)
-
-
-def describe_devices(found: dict[str, Any]) -> list[str]:
-    """Lines for ``thermodepth devices``: each device with its source spec, a clear
-    "no ... found" for each kind missing, and why RealSense devices cannot be listed when
-    pyrealsense2 is unavailable."""
-    lines = []
-    if found.get("realsense_unavailable"):
-        lines.append(f"RealSense devices cannot be listed: {found['realsense_unavailable']}")
-    elif found["realsense"]:
-        for d in found["realsense"]:
-            lines.append(
-                f"RealSense {d['name']}  serial {d['serial']}  firmware {d['firmware']}  "
-                f"USB {d['usb']}  -> --source realsense:{d['serial']}"
-            )
-    else:
-        lines.append("no RealSense device found")
-    if found["purethermal"]:
-        for d in found["purethermal"]:
-            lines.append(
-                f"PureThermal (Lepton) /dev/video{d['index']} {d['name']!r}  "
-                f"-> --source lepton:{d['index']}"
-            )
-    else:
-        others = [
-            f"/dev/video{d['index']} ({d['name'] or 'unnamed'})"
-            for d in found["video"]
-            if not d["purethermal"]
-        ]
-        lines.append(
-            "no PureThermal (Lepton) found"
-            + (f"; other video devices: {', '.join(others)}" if others else "")
-        )
-    return lines
-
-
-MAX_SKEW_HELP = "Pairing: drop pairs further apart in time, ms."
-THERMAL_LATENCY_HELP = (
-    "Lepton: subtract this from each frame's arrival time, ms (exposure to arrival; "
-    "default 0: not calibrated)."
-)
-
-
-def _check_timing(max_skew_ms: float, thermal_latency_ms: float) -> None:
-    if max_skew_ms < 0:
-        raise InputError("--max-skew-ms: must be >= 0")
-    if thermal_latency_ms < 0:
-        raise InputError("--thermal-latency-ms: must be >= 0")
 
 
 @app.command("record")
@@ -651,45 +542,29 @@ def record_cmd(
             "own depth intrinsics replace its depth section (sim and recordings keep theirs)."
         ),
     ] = None,
-    max_skew_ms: Annotated[float, typer.Option(help=MAX_SKEW_HELP)] = 20.0,
-    thermal_latency_ms: Annotated[float, typer.Option(help=THERMAL_LATENCY_HELP)] = 0.0,
+    max_skew_ms: MaxSkewMs = 20.0,
+    thermal_latency_ms: ThermalLatencyMs = 0.0,
     ir: Annotated[bool, typer.Option("--ir", help="Also record the infrared image.")] = False,
     overwrite: Annotated[
-        bool, typer.Option(help="Replace an existing recording (nothing else is replaced).")
+        bool,
+        typer.Option("--overwrite", help="Replace an existing recording (nothing else)."),
     ] = False,
 ) -> None:
     """Record a source into a crash-safe Zarr v3 recording (Ctrl-C stops cleanly)."""
-    from .calibration import Calibration
-    from .session import check_outputs, record_session
-    from .sources import open_source
+    from .app.record import RecordOptions, record
 
-    if duration is not None and duration <= 0:
-        raise InputError("--duration: must be > 0 seconds")
-    if frames is not None and frames < 1:
-        raise InputError("--frames: must be at least 1")
-    if duration is None and frames is None and source.strip() == "sim":
-        raise InputError("--source sim never ends: give --frames or --duration")
-    _check_timing(max_skew_ms, thermal_latency_ms)
-    check_outputs(record=out, overwrite=overwrite)  # before any camera starts
-    cal = Calibration.load(calibration) if calibration else None
-    src = open_source(
+    options = RecordOptions(
         source,
-        cal,
-        max_skew_s=max_skew_ms / 1000.0,
-        with_ir=ir,
-        thermal_latency_s=thermal_latency_ms / 1000.0,
-        warn=_warn_line,
+        out,
+        duration,
+        frames,
+        calibration,
+        max_skew_ms / 1000.0,
+        thermal_latency_ms / 1000.0,
+        ir,
+        overwrite,
     )
-    with progress_bar(f"recording {src.name}", frames) as advance:
-        result = record_session(
-            src,
-            out,
-            duration_s=duration,
-            frames=frames,
-            calibration=cal,
-            overwrite=overwrite,
-            progress=advance,
-        )
+    result = record(options, BARS, warn_line)
     console.print(
         f"wrote {out}: {result.recorder.summary()}; stopped: {result.stopped}", soft_wrap=True
     )
@@ -698,16 +573,12 @@ def record_cmd(
         raise ThermodepthError(f"{result.error}; the recording keeps every frame up to then")
 
 
-def _warn_line(message: str) -> None:
-    err_console.print(
-        f"[yellow]warning:[/yellow] {escape(message)}", highlight=False, soft_wrap=True
-    )
-
-
-def print_source_stats(result: Any) -> None:
+def print_source_stats(result: SessionResult) -> None:
     """The pairing statistics and the source's counters of a session, one line each."""
     if result.pairing is not None:
-        console.print(f"pairing: {result.pairing.summary()}", soft_wrap=True, highlight=False)
+        by = f" (paired by {result.pairing_by})" if result.pairing_by else ""
+        line = result.pairing.summary() if not result.pairing_by else result.pairing.skew_summary()
+        console.print(f"pairing{by}: {line}", soft_wrap=True, highlight=False)
     if result.counters:
         counts = ", ".join(f"{k} {v}" for k, v in result.counters.items())
         console.print(f"source: {counts}", soft_wrap=True, highlight=False)
@@ -738,98 +609,28 @@ def run_cmd(
             "-o", "--out", help="Write measurements.jsonl, alarms.jsonl and hotspots.csv here."
         ),
     ] = None,
-    max_skew_ms: Annotated[float, typer.Option(help=MAX_SKEW_HELP)] = 20.0,
-    thermal_latency_ms: Annotated[float, typer.Option(help=THERMAL_LATENCY_HELP)] = 0.0,
-    quiet: Annotated[bool, typer.Option(help="No line per frame.")] = False,
+    max_skew_ms: MaxSkewMs = 20.0,
+    thermal_latency_ms: ThermalLatencyMs = 0.0,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No line per frame.")] = False,
 ) -> None:
     """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
-    _check_timing(max_skew_ms, thermal_latency_ms)
-    result = run(
-        source,
-        settings,
-        record,
-        frames,
-        out,
-        None if quiet else print_frame,
-        max_skew_s=max_skew_ms / 1000.0,
-        thermal_latency_s=thermal_latency_ms / 1000.0,
+    from .app.run import RunOptions, run
+    from .sinks import CallbackSink
+
+    options = RunOptions(
+        source, settings, frames, out, record, max_skew_ms / 1000.0, thermal_latency_ms / 1000.0
     )
+    result = run(options, [] if quiet else [CallbackSink(print_frame)], warn_line)
     console.print(
         f"{result.frames} frames fused ({result.shutter_frames} while the shutter was "
         f"closed), {sum(e['event'] == 'alarm' for e in result.events)} alarms; "
         f"stopped: {result.stopped}"
     )
-    if result.recorder is not None:
-        console.print(f"recorded to {record}: {result.recorder.summary()}", soft_wrap=True)
+    for line in result.outputs:
+        console.print(line, soft_wrap=True, highlight=False)
     print_source_stats(result)
     if result.error:
-        raise InputError(result.error)
-
-
-def pipeline_settings(settings_path: Path | None, settings: Any) -> dict[str, Any]:
-    """What a recording made by ``run --record`` stores of the pipeline: the settings file's
-    path and text, and the compensation model's path and SHA-256."""
-    import hashlib
-
-    out: dict[str, Any] = {"settings_file": None, "settings_yaml": None}
-    if settings_path is not None:
-        out["settings_file"] = str(settings_path)
-        out["settings_yaml"] = Path(settings_path).read_text(encoding="utf-8")
-    if settings.compensation is not None:
-        out["compensation_model"] = str(settings.compensation)
-        out["compensation_sha256"] = hashlib.sha256(
-            Path(settings.compensation).read_bytes()
-        ).hexdigest()
-    return {"pipeline": out}
-
-
-def run(
-    source_spec: str,
-    settings_path: Path | None,
-    record: Path | None = None,
-    frames: int | None = None,
-    out: Path | None = None,
-    on_frame: Callable[[Any], None] | None = None,
-    *,
-    max_skew_s: float = 0.020,
-    thermal_latency_s: float = 0.0,
-) -> Any:
-    """Check the outputs, open the source and the pipeline, then
-    :func:`thermodepth.session.run_session` (which closes the source in every case; so does
-    this function when the pipeline cannot be built)."""
-    from .calibration import Calibration
-    from .pipeline import Pipeline, Settings
-    from .session import check_outputs, run_session
-    from .sources import open_source
-
-    settings = Settings.load(settings_path) if settings_path else Settings()
-    cal = Calibration.load(settings.calibration) if settings.calibration else None
-    check_outputs(record=record, out_dir=out)  # before any camera starts
-    src = open_source(
-        source_spec,
-        cal,
-        frames=frames,
-        max_skew_s=max_skew_s,
-        thermal_latency_s=thermal_latency_s,
-        warn=_warn_line,
-    )
-    try:
-        src.require_pairs()
-        # the source's calibration, else the settings'; Pipeline refuses when neither has one
-        pipeline = Pipeline(settings, src.calibration or cal)
-        recorded = pipeline_settings(settings_path, settings) if record else None
-    except BaseException:
-        src.close()
-        raise
-    return run_session(
-        src,
-        pipeline,
-        frames=frames,
-        record=record,
-        out_dir=out,
-        on_frame=on_frame,
-        record_settings=recorded,
-    )
+        raise ThermodepthError(result.error)
 
 
 def _flag_note(flags: int) -> str:
@@ -842,7 +643,7 @@ def _flag_note(flags: int) -> str:
     return f" [{', '.join(names)}]" if names else ""
 
 
-def print_frame(fused: Any) -> None:
+def print_frame(fused: FusedFrame) -> None:
     """One line per fused frame: time, VOx, the hottest hotspot, ROIs, alarms."""
     if fused.in_ffc:
         console.print(
@@ -886,9 +687,7 @@ def calibrate_cmd(
     square_m: Annotated[
         float, typer.Option("--square-m", help="Square size (circle grid step), metres.")
     ],
-    board: Annotated[
-        str, typer.Option(help="checkerboard:COLSxROWS (inner corners) or circles:COLSxROWS.")
-    ] = "checkerboard:9x6",
+    board: Board = "checkerboard:9x6",
     out: Annotated[Path, typer.Option("-o", "--out", help="Calibration file to write.")] = Path(
         "calib.yaml"
     ),
@@ -925,48 +724,27 @@ def calibrate_cmd(
 ) -> None:
     """Calibrate the depth + thermal pair from board captures: thermal (and depth)
     intrinsics and thermal_from_depth, with a quality report."""
-    from .calibrate import (
-        discover_pairs,
-        load_depth_intrinsics,
-        plot_report,
-        run_calibration,
-        write_report_json,
+    from .app.calibrate import CalibrateOptions, calibrate
+
+    options = CalibrateOptions(
+        pairs_dir,
+        square_m,
+        board,
+        out,
+        depth_intrinsics,
+        depth_scale_m,
+        thermal_model,
+        depth_model,
+        thermal_refine,
+        drop_outliers,
+        report_dir,
     )
-    from .calibration import BoardSpec
-
-    spec = BoardSpec.parse(board, square_m)
-    fixed, scale = (None, None)
-    if depth_intrinsics is not None:
-        fixed, scale = load_depth_intrinsics(depth_intrinsics)
-    if depth_scale_m is not None:
-        if not (math.isfinite(depth_scale_m) and depth_scale_m > 0):
-            raise InputError(f"--depth-scale-m: must be a finite number > 0, got {depth_scale_m}")
-        scale = depth_scale_m
-    listing = discover_pairs(pairs_dir)
-    with progress_bar("detecting boards", len(listing.pairs)) as advance:
-        result = run_calibration(
-            listing,
-            spec,
-            depth_intrinsics=fixed,
-            depth_scale_m=0.001 if scale is None else scale,
-            thermal_model=thermal_model,
-            depth_model=depth_model,
-            thermal_refine=thermal_refine,
-            drop_outliers=drop_outliers,
-            progress=advance,
-        )
-    result.calibration.save(out)
-    reports = report_dir if report_dir is not None else out.parent
-    write_report_json(result, reports / "calib_report.json")
-    plot_report(result, reports / "calib_report.png")
-    print_calibration_report(result)
-    console.print(
-        f"wrote {out}, {reports / 'calib_report.json'} and {reports / 'calib_report.png'}",
-        highlight=False,
-    )
+    outcome = calibrate(options, BARS)
+    print_calibration_report(outcome.result)
+    console.print(f"wrote {', '.join(map(str, outcome.files))}", highlight=False)
 
 
-def print_calibration_report(result: Any) -> None:
+def print_calibration_report(result: CalibrationResult) -> None:
     """The terminal report of a calibration: the fit, per-image errors, skipped files."""
     rep = result.report_dict()
     d, t, st = rep["depth_camera"], rep["thermal_camera"], rep["stereo"]
@@ -1039,21 +817,14 @@ def demo_cmd(
         "demo-out"
     ),
     quick: Annotated[
-        bool, typer.Option(help="Fewer poses, samples and distances (~20 s).")
+        bool, typer.Option("--quick", help="Fewer poses, samples and distances (~20 s).")
     ] = False,
 ) -> None:
     """The whole story on the simulated rig: calibrate, reproduce the paper, generalise,
     inspect, and write report.md / report.html."""
-    from .demo import STEPS, DemoConfig, run_demo
+    from .app.demo import DemoConfig, run_demo
 
-    with _progress() as bar:
-        task = bar.add_task("demo", total=len(STEPS))
-
-        def step(name: str) -> None:
-            bar.update(task, description=f"demo: {name}", completed=STEPS.index(name))
-
-        summary = run_demo(out, DemoConfig(quick=quick), step)
-        bar.update(task, description="demo: done", completed=len(STEPS))
+    summary = run_demo(out, DemoConfig(quick=quick), BARS)
     console.print(f"wrote {out / 'report.md'} and {out / 'report.html'}")
     for line in summary.get("findings", []):
         console.print(f"  - {line}", highlight=False)

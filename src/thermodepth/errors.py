@@ -14,6 +14,26 @@ class InputError(ThermodepthError, ValueError):
     """A file, field, row or frame the user gave is not acceptable; the message says which."""
 
 
+class FieldError(InputError):
+    """A value given for a named field (a function's argument, a setting) is not acceptable.
+
+    ``str()`` reads ``field: message``; the command line names its option instead of the
+    field (``--emissivity: ...``), so the library never needs to know the flags.
+    """
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+        self.message = message
+
+
+def check_count(field: str, value: int | None, minimum: int = 1) -> None:
+    """A count the user gives (frames, samples, poses, pairs): a whole number of at least
+    ``minimum``, or None where the count is optional; FieldError otherwise."""
+    if value is not None and value < minimum:
+        raise FieldError(field, f"must be at least {minimum}, got {value}")
+
+
 def read_text(path: str | Path, encoding: str = "utf-8") -> str:
     """A text file's content; a file that cannot be read or is not text in ``encoding``
     raises one InputError line naming it (and the first bad byte's offset)."""

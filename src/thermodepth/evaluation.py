@@ -66,14 +66,8 @@ def _score(
     """Registration error of ``reg`` on a frame, against its truth (see registration_error)."""
     cal = reg.calibration
     seen = truth.visible_in_thermal & (frame.depth > 0)
-    v, u = np.nonzero(seen)
-    if reg.method == "paper":
-        ut, vt = reg.thermal_pixel_of_depth()
-        pos = np.stack([ut[v, u], vt[v, u]], axis=-1).astype(np.float64)
-    else:
-        z = frame.depth[seen] * cal.depth_scale_m
-        pts = cal.thermal_from_depth.apply(cal.depth.deproject(np.stack([u, v], -1), z))
-        pos = cal.thermal.project(pts)
+    ut, vt = reg.thermal_pixel_of_depth(frame.depth)
+    pos = np.stack([ut[seen], vt[seen]], axis=-1).astype(np.float64)
     err = np.linalg.norm(pos - truth.thermal_pixel_of_depth[seen], axis=-1)
     h_t, w_t = cal.thermal.shape
     index = np.arange(h_t * w_t, dtype=np.float32).reshape(h_t, w_t)
@@ -106,7 +100,7 @@ def registration_error(
 
 def registration_error_table(
     distances_m: tuple[float, ...] = (0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 3.0),
-    methods: tuple[str, ...] = REGISTRATION_METHODS,
+    methods: tuple[str, ...] = tuple(REGISTRATION_METHODS),
 ) -> list[RegistrationError]:
     """:func:`registration_error` for every method and distance (each wall rendered once,
     each method's registration built once), method by method."""

@@ -3,36 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .compensation import CompensationModel, PaperModel, apply_to_table, by_vox
+from .compensation import CompensationModel, apply_to_table, by_vox
+from .plotting import pyplot, save_figure
 from .sweep import SweepTable
 
 if TYPE_CHECKING:
     from .evaluation import RegistrationError
     from .pipeline import FusedFrame
-
-
-def pyplot() -> Any:
-    """matplotlib.pyplot on the file-only Agg backend (no display needed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
-    """Lay out, write (creating the folder) and close a figure; returns the path."""
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(out, dpi=dpi)
-    pyplot().close(fig)
-    return out
 
 
 def plot_registration_error(rows: list[RegistrationError], path: str | Path) -> Path:
@@ -88,11 +69,7 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
                 ax.plot(x, y, "o", ms=3, color=color, label=f"{d:g} m")
                 if with_curves:  # the model's prediction of the uncompensated reading
                     xs = np.linspace(x.min(), x.max(), 100)
-                    if isinstance(model, PaperModel):
-                        if d in model.distances_m and np.isclose(r, model.reference_temp_c):
-                            ax.plot(xs, model.curve(xs, d), "-", color=color, lw=1)
-                    else:
-                        ax.plot(xs, model.predict_measured(r, xs, d), "-", color=color, lw=1)
+                    ax.plot(xs, model.predict_measured(r, xs, d), "-", color=color, lw=1)
             ax.axhline(r, color="k", lw=0.8, ls=":")
             ax.set_xlabel("VOx (sensor) temperature (C)")
             ax.set_ylabel("reading (C)")

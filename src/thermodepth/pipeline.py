@@ -23,21 +23,16 @@ from dataclasses import dataclass, field
 from enum import IntFlag
 from functools import cached_property
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import AfterValidator, Field, PrivateAttr, ValidationError, model_validator
+from pydantic import AfterValidator, Field, PrivateAttr, model_validator
 
-from .calibration import (
-    Calibration,
-    PlanckSchema,
-    StrictSchema,
-    describe_validation_error,
-    read_mapping,
-)
-from .compensation import Flag, PaperModel, RadianceModel, load_model
-from .errors import InputError, repeated
+from .calibration import Calibration
+from .compensation import CompensationModel, Flag, NoCompensation, load_model
+from .conditions import ConditionsSchema
+from .errors import FieldError, InputError, repeated
 from .frames import FramePair
 from .measure import (
     AlarmRule,
@@ -55,17 +50,13 @@ from .measure import (
 )
 from .radiometry import (
     MAX_DISTANCE_M,
-    PAPER_2022,
     PLANCK_PRESETS,
     RADIOMETRY_METHODS,
     TEMP_LIMITS_C,
-    ObjectParams,
     PlanckConstants,
-    RadiometryParams,
-    invalid_counts,
-    raw_to_celsius,
 )
-from .registration import REGISTRATION_METHODS, Reason, Registration
+from .registration import INTERPOLATIONS, REGISTRATION_METHODS, Reason, Registration
+from .schema import PlanckSchema, StrictSchema, load_validated
 
 FloatArray = NDArray[np.float32]
 
@@ -104,27 +95,25 @@ def _one_of(choices: Collection[str]) -> AfterValidator:
 TempC = Annotated[float, Field(gt=TEMP_LIMITS_C[0], le=TEMP_LIMITS_C[1])]
 
 
-class RadiometrySettings(StrictSchema):
-    emissivity: float = Field(default=0.95, gt=0, le=1)
-    ambient_temp_c: TempC = 25.0
-    reflected_temp_c: TempC | None = None
-    humidity_pct: float = Field(default=50.0, ge=0, le=100)
+class RadiometrySettings(ConditionsSchema):
+    """The viewing conditions (:class:`~thermodepth.conditions.ConditionsSchema`: emissivity,
+    ambient_temp_c, reflected_temp_c, humidity_pct, window), the radiometric model and the
+    camera's Planck constants (a preset's name or R, B, F, O; None: a radiance compensation
+    model's own, else paper2022)."""
+
     method: Annotated[str, _one_of(RADIOMETRY_METHODS)] = "flir"
-    # None: a radiance compensation model's own constants, else paper2022
     planck: Annotated[str, _one_of(PLANCK_PRESETS)] | PlanckSchema | None = None
 
-    def constants(self, default: PlanckConstants = PAPER_2022) -> PlanckConstants:
-        """The Planck constants the settings name, or ``default`` when they name none."""
-        if self.planck is None:
-            return default
-        if isinstance(self.planck, str):
-            return PLANCK_PRESETS[self.planck]
+    def constants(self) -> PlanckConstants | None:
+        """The Planck constants the settings name, or None when they name none."""
+        if self.planck is None or isinstance(self.planck, str):
+            return None if self.planck is None else PLANCK_PRESETS[self.planck]
         return self.planck.constants()
 
 
 class RegistrationSettings(StrictSchema):
     method: Annotated[str, _one_of(REGISTRATION_METHODS)] = "reproject"
-    interpolation: Literal["nearest", "bilinear"] = "nearest"
+    interpolation: Annotated[str, _one_of(INTERPOLATIONS)] = "nearest"
 
 
 class HotspotSettings(StrictSchema):
@@ -204,11 +193,7 @@ class Settings(StrictSchema):
     def load(cls, path: str | Path) -> Settings:
         """Read and validate a settings YAML; one InputError line names file and field."""
         p = Path(path)
-        data = read_mapping(p)
-        try:
-            s = cls.model_validate(data)
-        except ValidationError as exc:
-            raise InputError(f"{p}: {describe_validation_error(exc)}") from None
+        s = load_validated(cls, p)
         base = p.parent
         s = s.model_copy(
             update={
@@ -337,23 +322,14 @@ class Pipeline:
         ):
             raise ValueError("the shared registration is of another calibration or method")
         self.registration = registration
-        self.model = load_model(s.compensation) if s.compensation is not None else None
-        r = s.radiometry
-        radiance = self.model if isinstance(self.model, RadianceModel) else None
-        planck = r.constants(radiance.planck if radiance else PAPER_2022)
-        if radiance and (r.method != "flir" or planck != radiance.planck):
-            # its counts model was fitted through single-pass radiometry with its own constants
-            raise InputError(
-                f"{s.compensation}: a radiance compensation model carries its own radiometry "
-                "(method flir and the Planck constants it was fitted with); leave "
-                "radiometry.method and radiometry.planck out of the settings"
-            )
-        self.params = RadiometryParams(
-            planck=planck,
-            obj=ObjectParams.from_celsius(
-                r.emissivity, 0.0, r.ambient_temp_c, r.humidity_pct, r.reflected_temp_c
-            ),
+        self.model: CompensationModel = (
+            load_model(s.compensation) if s.compensation is not None else NoCompensation()
         )
+        r = s.radiometry
+        try:
+            self.radiometry = self.model.radiometry(r.conditions(), r.constants(), r.method)
+        except FieldError as exc:
+            raise InputError(f"{s.compensation}: {exc.message}") from None
         self.rois = [roi.roi() for roi in s.rois]
         # fixed shapes on the depth grid: their boxes and masks once, so that each frame
         # gathers from the box only (depth ranges change each frame)
@@ -398,27 +374,12 @@ class Pipeline:
     def temperatures(
         self, counts: NDArray[np.generic], vox_c: float, distance_m: FloatArray
     ) -> tuple[FloatArray, NDArray[np.uint8]]:
-        """Temperature (C) and flags of thermal counts, at per-pixel distances (m)."""
-        r = self.settings.radiometry
+        """Temperature (C) and flags of thermal counts, at per-pixel distances (m): the
+        compensation model's (:meth:`~thermodepth.compensation.CompensationModel.from_counts`),
+        with invalid counts NaN and flagged ``BAD_COUNTS``."""
         c = np.asarray(counts, dtype=np.float64)
-        method = r.method
-        if isinstance(self.model, RadianceModel):
-            temp, flags = self.model.apply_counts(
-                c,
-                vox_c,
-                distance_m,
-                r.ambient_temp_c,
-                r.humidity_pct,
-                r.emissivity,
-                r.reflected_temp_c,
-            )
-        elif isinstance(self.model, PaperModel):
-            measured = raw_to_celsius(c, self.params, method)  # no distance correction
-            temp, flags = self.model.apply(measured, vox_c, distance_m)
-        else:
-            temp = raw_to_celsius(c, self.params.with_object(distance_m=distance_m), method)
-            flags = np.where(np.isfinite(temp), 0, Flag.INVALID).astype(np.uint8)
-        bad = invalid_counts(c, self.params)
+        temp, flags = self.model.from_counts(c, vox_c, distance_m, self.radiometry)
+        bad = self.radiometry.invalid(c)
         flags = flags | np.where(bad, np.uint8(PixelFlag.BAD_COUNTS), np.uint8(0))
         return np.where(bad, np.nan, temp).astype(np.float32), flags.astype(np.uint8)
 
@@ -479,8 +440,8 @@ class Pipeline:
             s.hotspots.threshold_c,
             cal.thermal,
             cal.thermal_from_depth,
-            s.radiometry.ambient_temp_c,
-            s.radiometry.emissivity,
+            float(self.radiometry.conditions.ambient_temp_c),
+            float(self.radiometry.conditions.emissivity),
             frame.flags_thermal,
             s.hotspots.min_thermal_px,
         )

@@ -285,7 +285,7 @@ class ObjectParams:
     atmosphere_temp_k: float | FloatArray = 293.15
     relative_humidity: float | FloatArray = 0.5
     window_transmission: float = 1.0
-    window_temp_k: float = 293.15
+    window_temp_k: float | FloatArray = 293.15
 
     def __post_init__(self) -> None:
         def outside(value: float | FloatArray, lo: float, hi: float, lo_open: bool) -> bool:

@@ -1,28 +1,33 @@
-"""Recording and measuring sessions over a source: opened in order, closed in every case.
+"""Sessions over a source: the loops that ``record`` and ``run`` turn, and the sinks they feed.
 
-:func:`record_session` is what ``thermodepth record`` runs, :func:`run_session` what
-``thermodepth run`` runs. A measuring pipeline that also records (``run --record``) iterates
-``source.pairs(recorder.add)``: the source's FramePairs, while a
-:class:`~thermodepth.io.recording.Recorder` stores every event. Both sessions close through
-one routine: the source first (no more frames), then the recording, with the closing
-attributes :func:`closing_attrs` builds (why it stopped, pairing statistics, the source's
-counters).
+A session opens its sinks before any frame flows, feeds them, and closes everything in every
+case: the source first (no more frames), then the sinks, each told how the session ended.
+
+A **sink** (:class:`Sink`) is whatever consumes a session: the recorder (every raw event the
+source emits), the measurements files, and next the live viewer, MQTT and batch outputs. Each
+is one small object with ``open``, ``event``, ``frame`` and ``close``; a session calls them
+and knows nothing else of them, so a new sink touches neither the pipeline nor this loop.
+
+:func:`record_session` records a source (the recorder is its one sink); :func:`run_session`
+fuses every pair through a :class:`~thermodepth.pipeline.Pipeline` and hands each fused
+frame to the sinks.
 """
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Iterator, Sequence
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Protocol
 
 from .calibration import Calibration
-from .errors import InputError, ThermodepthError
-from .frames import DepthFrame, Match, ThermalFrame
-from .io.measurements import MeasurementWriter, jsonable
-from .io.recording import Recorder, RecorderStats, RecordingWriter, check_output
+from .errors import InputError, ThermodepthError, check_count
+from .frames import DepthFrame, Match, StreamEvent, ThermalFrame
+from .io.measurements import jsonable
+from .io.recording import RecorderStats
+from .pipeline import FusedFrame, Pipeline
+from .progress import SILENT, Reporter
 from .sources.base import DeviceLostError, Source, event_time_s
 from .sources.pairing import PairingStats
 
@@ -31,14 +36,16 @@ from .sources.pairing import PairingStats
 class SessionResult:
     """What every session reports: why it stopped (``"frames"``, ``"duration"``, ``"end"``
     (the source ended), ``"interrupted"`` (Ctrl-C), ``"device lost"`` or ``"error"``, with
-    ``error``), the recorder's stats if it recorded, the pairing statistics (sources that pair
-    in time) and the source's counters (frames it skipped, by name; see
-    :meth:`~thermodepth.sources.base.Source.counters`)."""
+    ``error``), the recorder's stats if it recorded, the pairing statistics (of the source's
+    pairing in time; for sources that do not pair, of the pairs the session saw, with
+    ``pairing_by`` saying who paired them) and the source's counters (frames it skipped, by
+    name; see :meth:`~thermodepth.sources.base.Source.counters`)."""
 
     stopped: str = "end"
     error: str | None = None
     recorder: RecorderStats | None = None
     pairing: PairingStats | None = None
+    pairing_by: str | None = None
     counters: dict[str, int] = field(default_factory=dict)
 
 
@@ -55,11 +62,68 @@ class RecordResult(SessionResult):
 @dataclass(kw_only=True)
 class RunResult(SessionResult):
     """How a measuring run went (:class:`SessionResult`): frames fused, frames skipped (shutter
-    closed) and alarm events."""
+    closed), alarm events, and each sink's closing line for the user."""
 
     frames: int = 0
     shutter_frames: int = 0
     events: list[dict[str, Any]] = field(default_factory=list)
+    outputs: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """What a sink may need to open: the source (its name, calibration, settings, files,
+    whether it is live), the calibration frames are fused with (None when only recording),
+    the pipeline's settings, and ``provenance``: what a recording stores of the run's
+    settings (the settings file's text, the compensation model's hash)."""
+
+    source: Source
+    calibration: Calibration | None = None
+    pipeline: Pipeline | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+
+class Sink(Protocol):
+    """A consumer of a session (see the module docstring). ``check`` refuses, before any
+    camera starts, what ``open`` would refuse (an output that exists); ``open`` before any
+    frame (it may still refuse with an InputError: nothing has flowed); ``event`` for every
+    event the source emits (raw frames and pairs, in order); ``frame`` for every fused frame
+    (runs only); ``close`` once, in every case, with how the session ended; ``summary`` a
+    line for the user at the end (None: nothing to say)."""
+
+    def check(self) -> None: ...
+
+    def open(self, context: RunContext) -> None: ...
+
+    def event(self, event: StreamEvent) -> None: ...
+
+    def frame(self, fused: FusedFrame) -> None: ...
+
+    def close(self, result: SessionResult) -> None: ...
+
+    def summary(self) -> str | None: ...
+
+
+class BaseSink:
+    """A sink that does nothing: subclasses override what they consume."""
+
+    def check(self) -> None:
+        """Nothing to refuse."""
+
+    def open(self, context: RunContext) -> None:
+        """Nothing to open."""
+
+    def event(self, event: StreamEvent) -> None:
+        """Raw events are not wanted."""
+
+    def frame(self, fused: FusedFrame) -> None:
+        """Fused frames are not wanted."""
+
+    def close(self, result: SessionResult) -> None:
+        """Nothing to close."""
+
+    def summary(self) -> str | None:
+        return None
 
 
 @contextmanager
@@ -88,7 +152,7 @@ def closing_attrs(result: SessionResult) -> dict[str, Any]:
     if result.error is not None:
         attrs["error"] = result.error
     p = result.pairing
-    if p is not None:
+    if p is not None and result.pairing_by is None:
         attrs["pairing"] = jsonable(
             {
                 "pairs": p.pairs,
@@ -102,66 +166,33 @@ def closing_attrs(result: SessionResult) -> dict[str, Any]:
     return attrs
 
 
-def check_outputs(
-    record: str | Path | None = None, out_dir: str | Path | None = None, overwrite: bool = False
-) -> None:
-    """Refuse outputs that cannot be created, before any camera starts: a recording path that
-    exists (unless ``overwrite`` and it is a recording; see
-    :func:`~thermodepth.io.recording.check_output`) and a measurements directory that is a
-    file. One InputError line each."""
-    if record is not None:
-        check_output(record, overwrite)
-    if out_dir is not None and Path(out_dir).exists() and not Path(out_dir).is_dir():
-        raise InputError(f"{out_dir}: not a directory (measurements go into a directory)")
-
-
-def open_recorder(
-    source: Source,
-    out: str | Path,
-    calibration: Calibration | None = None,
-    overwrite: bool = False,
-    settings: dict[str, Any] | None = None,
-) -> Recorder:
-    """A background recorder for ``source`` at ``out``: blocking for files and the simulator
-    (nothing dropped), dropping for live cameras (never stalls them). The recording stores
-    the source's calibration (else ``calibration``), its settings updated with ``settings``,
-    and the depth camera's own intrinsics and depth unit where the source has them. Refuses
-    (InputError) to write over a path the source reads."""
-    writer = RecordingWriter(
-        out,
-        source.calibration or calibration,
-        {**source.settings(), **(settings or {})},
-        source=source.name,
-        overwrite=overwrite,
-        inputs=source.files,
-        device_depth=source.device_depth,
-    )
-    return Recorder(writer, block=not source.live)
-
-
-R = TypeVar("R", bound=Recorder | None)
-
-
 @contextmanager
-def _session(source: Source, result: SessionResult, open_outputs: Callable[[], R]) -> Iterator[R]:
-    """The frame of every session: ``open_outputs()`` (the recorder, if any), then the body
-    under :func:`stopping`; in every case (an output that cannot be created included) the
-    source is closed, its counters noted, and the recording closed with
-    :func:`closing_attrs`."""
-    recorder = None
-    try:
-        recorder = open_outputs()
-        if recorder is not None:
-            result.recorder = recorder.stats
-        with stopping(result):
-            yield recorder
-    finally:
+def _session(
+    source: Source, result: SessionResult, sinks: Sequence[Sink], context: RunContext
+) -> Iterator[None]:
+    """The frame of every session: each sink opened in turn, then the body under
+    :func:`stopping`; in every case (a sink that cannot open included) the source is closed,
+    its counters noted, and every sink that opened closed with the result."""
+    with ExitStack() as opened:
         try:
+            for sink in sinks:
+                sink.open(context)
+                opened.callback(sink.close, result)
+            with stopping(result):
+                yield
+        finally:
+            # a source that fails to close (a second Ctrl-C) still leaves closed sinks
             source.close()
             result.counters = source.counters()
-        finally:  # a source that fails to close (a second Ctrl-C) still leaves a closed recording
-            if recorder is not None:
-                recorder.close(closing_attrs(result))
+
+
+def _unit_of(source: Source) -> type:
+    """What a recording of ``source`` counts: pairs, or a single camera's frames."""
+    if source.streams == {"depth"}:
+        return DepthFrame
+    if source.streams == {"thermal"}:
+        return ThermalFrame
+    return Match
 
 
 def record_session(
@@ -172,96 +203,100 @@ def record_session(
     frames: int | None = None,
     calibration: Calibration | None = None,
     overwrite: bool = False,
-    progress: Callable[[int], None] | None = None,
+    reporter: Reporter = SILENT,
 ) -> RecordResult:
     """Record ``source`` into a new recording at ``out`` until ``frames`` units (pairs; for a
     single-camera source, its frames) are recorded, ``duration_s`` of source time has passed,
     the source ends, Ctrl-C, or a device is lost. The source and the recording are closed in
-    every case (the recording keeps every frame written). ``progress(n)`` is called per
-    unit."""
-    unit: type = Match
-    if source.streams == {"depth"}:
-        unit = DepthFrame
-    elif source.streams == {"thermal"}:
-        unit = ThermalFrame
+    every case (the recording keeps every frame written). ``reporter`` is told of each unit.
+    """
+    from .sinks.recorder import RecorderSink  # the one sink of a recording
+
+    check_count("frames", frames)
+    unit = _unit_of(source)
     result = RecordResult(path=Path(out), pairing=source.pairing)
+    recorder = RecorderSink(out, overwrite=overwrite)
+    context = RunContext(source, calibration)
+    skews: list[float] = []
     t0: float | None = None
-    opened = functools.partial(open_recorder, source, out, calibration, overwrite)
-    with _session(source, result, opened) as recorder:
-        if frames is not None and frames <= 0:
-            result.stopped = "frames"
-            return result
+    with (
+        reporter.task(f"recording {source.name}", frames) as advance,
+        _session(source, result, [recorder], context),
+    ):
+        result.recorder = recorder.stats
         for event in source.events():
             t = event_time_s(event)
             t0 = t if t0 is None else t0
             if duration_s is not None and t - t0 >= duration_s:
                 result.stopped = "duration"
                 break
-            recorder.add(event)
+            recorder.event(event)
+            if isinstance(event, Match):
+                skews.append(event.pair.skew_s)
             if isinstance(event, unit):
                 result.counted += 1
-                if progress:
-                    progress(1)
+                advance(1)
                 if frames is not None and result.counted >= frames:
                     result.stopped = "frames"
                     break
+    _pairs_seen(result, source, skews)
     return result
 
 
 def run_session(
     source: Source,
-    pipeline: Any,
+    pipeline: Pipeline,
     *,
     frames: int | None = None,
-    record: str | Path | None = None,
-    out_dir: str | Path | None = None,
-    on_frame: Callable[[Any], None] | None = None,
-    record_settings: dict[str, Any] | None = None,
+    sinks: Sequence[Sink] = (),
+    provenance: dict[str, Any] | None = None,
 ) -> RunResult:
-    """Fuse every pair of ``source`` through ``pipeline`` (a
-    :class:`~thermodepth.pipeline.Pipeline`) until ``frames`` pairs, the end, Ctrl-C or a lost
-    device; optionally record everything the source emits at ``record`` (with
-    ``record_settings`` added to the recording's settings; closed cleanly in every case) and
-    write the measurements into ``out_dir``
-    (:class:`~thermodepth.io.measurements.MeasurementWriter`). ``on_frame(fused)`` per frame.
-    A source without pairs is refused before anything is created; the source is closed in
-    every case."""
+    """Fuse every pair of ``source`` through ``pipeline`` until ``frames`` pairs, the end,
+    Ctrl-C or a lost device, handing every event and every fused frame to ``sinks`` (opened
+    first with a :class:`RunContext` holding ``provenance``, closed in every case). A source
+    without pairs is refused before anything is opened; the source is closed in every case.
+    """
+    check_count("frames", frames)
     result = RunResult(pairing=source.pairing)
-    sink: MeasurementWriter | None = None
-
-    def open_outputs() -> Recorder | None:
-        nonlocal sink
-        source.require_pairs()
-        if out_dir is not None:
-            try:
-                sink = MeasurementWriter(out_dir)
-            except OSError as exc:
-                raise InputError(
-                    f"{out_dir}: cannot write measurements ({exc.strerror or exc})"
-                ) from None
-        if record is None:
-            return None
-        return open_recorder(source, record, pipeline.calibration, settings=record_settings)
-
+    context = RunContext(source, pipeline.calibration, pipeline, provenance or {})
+    skews: list[float] = []
     try:
-        with _session(source, result, open_outputs) as recorder:
-            pairs = source.pairs(recorder.add if recorder else None)
-            for pair in pairs:
-                try:
-                    fused = pipeline.process(pair)
-                except InputError as exc:  # a frame that does not fit: say whose
-                    raise InputError(f"{source.name}: {exc}") from None
-                result.frames += 1
-                result.shutter_frames += fused.in_ffc
-                result.events.extend(fused.events)
-                if sink:
-                    sink.write(fused)
-                if on_frame:
-                    on_frame(fused)
-                if frames is not None and result.frames >= frames:
-                    result.stopped = "frames"
-                    break
-    finally:
-        if sink is not None:
-            sink.close()
+        source.require_pairs()
+    except BaseException:
+        source.close()
+        raise
+
+    def on_event(event: StreamEvent) -> None:
+        for sink in sinks:
+            sink.event(event)
+
+    with _session(source, result, sinks, context):
+        for pair in source.pairs(on_event):
+            try:
+                fused = pipeline.process(pair)
+            except InputError as exc:  # a frame that does not fit: say whose
+                raise InputError(f"{source.name}: {exc}") from None
+            skews.append(pair.skew_s)
+            result.frames += 1
+            result.shutter_frames += fused.in_ffc
+            result.events.extend(fused.events)
+            for sink in sinks:
+                sink.frame(fused)
+            if frames is not None and result.frames >= frames:
+                result.stopped = "frames"
+                break
+    result.outputs = [line for sink in sinks if (line := sink.summary()) is not None]
+    _pairs_seen(result, source, skews)
     return result
+
+
+def _pairs_seen(result: SessionResult, source: Source, skews: list[float]) -> None:
+    """Pairing statistics for a source that does not pair in time (the simulator pairs its
+    own frames; a recording's pairs were made live): those of the pairs the session saw,
+    with who paired them."""
+    if result.pairing is not None or not skews:
+        return
+    result.pairing = PairingStats(
+        thermal_frames=len(skews), pairs=len(skews), skews_s=[float(s) for s in skews]
+    )
+    result.pairing_by = source.paired_by or source.name

@@ -9,6 +9,10 @@ import math
 from pathlib import Path
 from typing import Any
 
+FILES = ("measurements.jsonl", "alarms.jsonl", "hotspots.csv")
+"""What a measurements folder holds: one JSON line per frame, one per alarm event, and one
+CSV row per hotspot and frame."""
+
 HOTSPOT_COLUMNS = (
     "frame",
     "thermal_time_s",
@@ -47,9 +51,10 @@ class MeasurementWriter:
     def __init__(self, out_dir: str | Path) -> None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        self._frames = open(out / "measurements.jsonl", "w", encoding="utf-8")  # noqa: SIM115
-        self._alarms = open(out / "alarms.jsonl", "w", encoding="utf-8")  # noqa: SIM115
-        self._hot_file = open(out / "hotspots.csv", "w", newline="", encoding="utf-8")  # noqa: SIM115
+        frames, alarms, hotspots = (out / name for name in FILES)
+        self._frames = open(frames, "w", encoding="utf-8")  # noqa: SIM115
+        self._alarms = open(alarms, "w", encoding="utf-8")  # noqa: SIM115
+        self._hot_file = open(hotspots, "w", newline="", encoding="utf-8")  # noqa: SIM115
         self._hotspots = csv.writer(self._hot_file)
         self._hotspots.writerow(HOTSPOT_COLUMNS)
 

@@ -13,10 +13,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..calibrate import Progress
-from ..calibration import BoardSpec, Calibration
+from ..board import BoardSpec
+from ..calibration import Calibration
 from ..camera import RigidTransform
-from ..radiometry import ZERO_C_IN_K, ObjectParams, RadiometryParams, raw_to_celsius
+from ..conditions import Conditions, Radiometry
+from ..progress import Progress
+from ..radiometry import ZERO_C_IN_K
 from ..sweep import COLUMNS, SweepTable
 from .lepton import FpaProfile, LeptonModel, LeptonSensor, ramp_fpa, steps_fpa
 from .rig import Rig, default_calibration
@@ -81,11 +83,9 @@ def simulate_sweep(
     """
     config = config or SweepConfig()
     lepton = lepton or LeptonModel()
-    params = RadiometryParams(
-        planck=lepton.planck,
-        obj=ObjectParams.from_celsius(
-            config.emissivity, 0.0, config.ambient_temp_c, config.humidity_pct
-        ),
+    radiometry = Radiometry(
+        Conditions(config.emissivity, config.ambient_temp_c, humidity_pct=config.humidity_pct),
+        lepton.planck,
     )
     blocks: list[dict[str, NDArray[np.float64]]] = []  # one per plate temperature and distance
     rng = np.random.default_rng(config.seed)
@@ -111,7 +111,7 @@ def simulate_sweep(
                 {
                     "distance_m": np.full(n, d),
                     "vox_temp_c": np.array(vox),
-                    "measured_temp_c": raw_to_celsius(stack, params).mean(axis=1),
+                    "measured_temp_c": radiometry.celsius(stack).mean(axis=1),
                     "reference_temp_c": np.full(n, plate_c),
                     "ambient_temp_c": np.full(n, config.ambient_temp_c),
                     "humidity_pct": np.full(n, config.humidity_pct),

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..calibration import BoardSpec
+from ..board import BoardSpec
 from ..camera import RigidTransform, rotation_from_euler
 from ..radiometry import ZERO_C_IN_K
 

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from ..calibration import Calibration
-from ..errors import InputError, ThermodepthError
+from ..errors import FieldError, InputError, ThermodepthError
 from .base import DeviceLostError, Source, event_time_s, with_device_depth
 from .pairing import DEFAULT_MAX_SKEW_S, PairingStats, StreamPairer, pair_times
 
@@ -108,13 +108,13 @@ def _open_both(opens: list[Callable[[], Any]], spec: str) -> list[Any]:
     if errors:
         for cam in cameras:
             cam.close()
-        raise InputError(f"--source {spec}: " + "; ".join(errors))
+        raise FieldError("source", f"{spec}: " + "; ".join(errors))
     return cameras
 
 
 def _calibration_unused(spec: str, owner: str, warn: Callable[[str], None] | None) -> None:
     if warn is not None:
-        warn(f"--source {spec}: {owner} keeps its own calibration; the one given is not used")
+        warn(f"{spec}: {owner} keeps its own calibration; the one given is not used")
 
 
 def open_source(
@@ -146,13 +146,14 @@ def open_source(
     kind, arg = parts[0]
     if len(parts) > 1:
         if [k for k, _ in parts] != ["realsense", "lepton"]:
-            raise InputError(f"--source: cannot combine {text!r}; expected realsense+lepton")
+            raise FieldError("source", f"cannot combine {text!r}; expected realsense+lepton")
         rs_arg, lepton_arg = parts[0][1], parts[1][1]
         if _is_file_arg(rs_arg):
-            raise InputError(
-                f"--source {text}: a RealSense file cannot be paired with a live Lepton (the "
+            raise FieldError(
+                "source",
+                f"{text}: a RealSense file cannot be paired with a live Lepton (the "
                 "file's times are not the live clock); record the file alone, or use "
-                "realsense[:SERIAL]+lepton"
+                "realsense[:SERIAL]+lepton",
             )
         depth_cam, thermal_cam = _open_both(
             [
@@ -169,7 +170,7 @@ def open_source(
         )
     if kind == "sim":
         if arg:
-            raise InputError(f"--source: 'sim' takes no argument, got {text!r}")
+            raise FieldError("source", f"'sim' takes no argument, got {text!r}")
         from .sim import SimSource
 
         src = SimSource(frames=frames)
@@ -180,7 +181,7 @@ def open_source(
         return src
     if kind == "recording":
         if not arg:
-            raise InputError("--source: recording:PATH needs a path")
+            raise FieldError("source", "recording:PATH needs a path")
         from .replay import RecordingSource
 
         replay = RecordingSource(arg, warn, calibration)
@@ -194,7 +195,7 @@ def open_source(
         )
     if kind == "lepton":
         return StreamSource(_lepton(arg, thermal_latency_s), "thermal", calibration)
-    raise InputError(f"--source: unknown {text!r}; expected one of {SPEC_HELP}")
+    raise FieldError("source", f"unknown {text!r}; expected one of {SPEC_HELP}")
 
 
 def list_devices() -> dict[str, Any]:

@@ -33,10 +33,13 @@ class Source:
     them); ``device_depth`` is the depth camera's own intrinsics and depth unit as a
     calibration file's ``depth`` section (pixels, metres per count), where the source knows
     them. ``counters()`` counts what the source skipped (frames without telemetry, ...).
-    Use it as a context manager or call ``close()``.
+    ``paired_by`` says who paired the frames of a source that does not pair them in time
+    itself (the simulator, a recording's live run). Use it as a context manager or call
+    ``close()``.
     """
 
     name: str = "source"
+    paired_by: str | None = None
     live: bool = False
     streams: frozenset[str] = frozenset({"depth", "thermal"})
     calibration: Calibration | None = None

@@ -51,9 +51,16 @@ class PairingStats:
         16.4 ms``."""
         return (
             f"pairs {self.pairs}, dropped {self.dropped} of {self.thermal_frames} thermal "
-            f"frames, |skew| median {self.median_abs_skew_ms:.1f} ms, "
-            f"max {self.max_abs_skew_ms:.1f} ms"
+            f"frames, |skew| {self._skews()}"
         )
+
+    def skew_summary(self) -> str:
+        """One line for pairs made elsewhere (nothing dropped here): ``pairs 87, |skew|
+        median 8.1 ms, max 16.4 ms``."""
+        return f"pairs {self.pairs}, |skew| {self._skews()}"
+
+    def _skews(self) -> str:
+        return f"median {self.median_abs_skew_ms:.1f} ms, max {self.max_abs_skew_ms:.1f} ms"
 
 
 def nearest_index(depth_times_s: NDArray[np.float64], t: float) -> int:

@@ -47,6 +47,17 @@ def import_realsense() -> Any:
     return rs
 
 
+def check_playback_file(path: Path) -> None:
+    """A librealsense recording that exists (.bag or .db3), or one InputError line."""
+    if path.suffix.lower() not in PLAYBACK_EXTENSIONS:
+        raise InputError(
+            f"{path}: expected a RealSense recording (.bag or .db3), "
+            f"got {path.suffix or 'no extension'}"
+        )
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+
+
 def intrinsics_from_rs(intr: Any) -> Intrinsics:
     """librealsense intrinsics -> ours. librealsense's principal point ``ppx, ppy`` and focal
     lengths are in pixels with the same convention as OpenCV (pixel centres at integers);
@@ -116,6 +127,8 @@ class RealSenseCamera:
         timeout_s: float = 5.0,
         warn: Callable[[str], None] | None = None,
     ) -> None:
+        if path is not None:  # a file that cannot be played says so, pyrealsense2 or not
+            check_playback_file(Path(path))
         rs = self.rs = import_realsense()
         self.size, self.fps, self.with_ir, self.timeout_s = size, fps, with_ir, timeout_s
         self.warn = warn or (lambda msg: warnings.warn(msg, stacklevel=2))
@@ -138,13 +151,6 @@ class RealSenseCamera:
         self._guard = DeviceGuard(self._stop)
 
     def _start_file(self, path: Path) -> Any:
-        if path.suffix.lower() not in PLAYBACK_EXTENSIONS:
-            raise InputError(
-                f"{path}: expected a RealSense recording (.bag or .db3), "
-                f"got {path.suffix or 'no extension'}"
-            )
-        if not path.is_file():
-            raise InputError(f"{path}: no such file")
         config = self.rs.config()
         config.enable_device_from_file(str(path), repeat_playback=False)
         try:

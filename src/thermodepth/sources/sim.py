@@ -18,6 +18,7 @@ class SimSource(Source):
     """
 
     name = "sim"
+    paired_by = "the simulator"
 
     def __init__(self, rig: Rig | None = None, frames: int | None = None) -> None:
         self.rig = rig or Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,9 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from . import calibrate
-from .calibration import BoardSpec, Calibration
-from .compensation import (
+from .. import calibrate
+from ..board import BoardSpec
+from ..calibration import Calibration
+from ..compensation import (
     PAPER_TABLE6,
     PaperModel,
     RadianceModel,
@@ -35,25 +36,24 @@ from .compensation import (
     save_model,
     score,
 )
-from .evaluation import (
+from ..evaluation import (
     TRAIN_DISTANCES_M,
     Generalisation,
     compensation_generalisation,
     registration_difference_px,
     registration_error_table,
 )
-from .figures import plot_overlay, plot_registration_error, plot_vox_curves
-from .io.measurements import jsonable
-from .io.pointcloud import write_ply
-from .io.report import Report
-from .pipeline import AlarmSettings, HotspotSettings, Pipeline, RoiSettings, Settings
-from .radiometry import ZERO_C_IN_K
-from .registration import Registration
-from .sim import Rig, camera_pose, constant_fpa, default_calibration, plate_scene
-from .sim.protocols import SweepConfig, simulate_sweep, simulate_targets
-from .sweep import SweepTable
-
-Step = Callable[[str], Any]
+from ..figures import plot_overlay, plot_registration_error, plot_vox_curves
+from ..io.measurements import jsonable
+from ..io.pointcloud import write_ply
+from ..io.report import Report
+from ..pipeline import AlarmSettings, HotspotSettings, Pipeline, RoiSettings, Settings
+from ..progress import SILENT, Reporter
+from ..radiometry import ZERO_C_IN_K
+from ..registration import Registration
+from ..sim import Rig, camera_pose, constant_fpa, default_calibration, plate_scene
+from ..sim.protocols import SweepConfig, simulate_sweep, simulate_targets
+from ..sweep import SweepTable
 
 
 @dataclass(frozen=True)
@@ -100,13 +100,12 @@ STEPS = ("calibration", "compensation sweeps", "paper tables", "inspection", "re
 
 
 def run_demo(
-    out_dir: str | Path, config: DemoConfig = DemoConfig(), step: Step | None = None
+    out_dir: str | Path, config: DemoConfig = DemoConfig(), reporter: Reporter = SILENT
 ) -> dict[str, Any]:
     """Run the demo into ``out_dir``; returns the key figures (also ``summary.json``).
-    ``step(name)`` is called as each of :data:`STEPS` starts (progress)."""
+    ``reporter`` is told as each of :data:`STEPS` starts."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    announce = step or (lambda name: None)
     timer = Timer()
     summary: dict[str, Any] = {"quick": config.quick}
     report = Report("thermodepth demo: the simulated D435 + Lepton 3 rig")
@@ -115,24 +114,29 @@ def run_demo(
         f"({'quick' if config.quick else 'full'} mode); the simulator's physics is "
         "described in docs/simulator.md. Figures are PNG files next to this report."
     )
+    with reporter.task("demo", len(STEPS)) as advance:
 
-    announce("calibration")
-    with timer("1. calibration"):
-        cal = _calibration(out / "calibration", config, report, summary)
-    announce("compensation sweeps")
-    with timer("2. sweeps and fits"):
-        gen = compensation_generalisation(samples=config.samples)
-        paper_sweep = simulate_sweep(SweepConfig(samples=config.samples * 2, seed=7))
-    announce("paper tables")
-    with timer("3. tables and figures"):
-        _paper_tables(out / "compensation", gen, paper_sweep, report, summary)
-        _generalisation(gen, report, summary)
-    announce("inspection")
-    with timer("4. inspection"):
-        _inspection(out / "inspection", cal, gen, config, report, summary)
-    announce("registration")
-    with timer("5. registration"):
-        _registration(out / "registration", config, report, summary)
+        def announce(name: str) -> None:  # a step starts: the one before it is done
+            advance(0 if name == STEPS[0] else 1, description=f"demo: {name}")
+
+        announce("calibration")
+        with timer("1. calibration"):
+            cal = _calibration(out / "calibration", config, report, summary)
+        announce("compensation sweeps")
+        with timer("2. sweeps and fits"):
+            gen = compensation_generalisation(samples=config.samples)
+            paper_sweep = simulate_sweep(SweepConfig(samples=config.samples * 2, seed=7))
+        announce("paper tables")
+        with timer("3. tables and figures"):
+            _paper_tables(out / "compensation", gen, paper_sweep, report, summary)
+            _generalisation(gen, report, summary)
+        announce("inspection")
+        with timer("4. inspection"):
+            _inspection(out / "inspection", cal, gen, config, report, summary)
+        announce("registration")
+        with timer("5. registration"):
+            _registration(out / "registration", config, report, summary)
+        advance(1, description="demo: done")
     _what_goes_wrong(report, summary)
     report.heading("Timings")
     report.table(["step", "seconds"], [[k, f"{v:.1f}"] for k, v in timer.seconds.items()])

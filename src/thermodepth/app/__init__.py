@@ -1,0 +1,21 @@
+"""The application layer: every use case of the command line as a plain, typed function.
+
+The command line (:mod:`thermodepth.cli`) only parses options, calls one of these and prints
+what it returns; scripts and tests call them the same way. Bad input raises
+:class:`~thermodepth.errors.InputError` (a :class:`~thermodepth.errors.FieldError` names the
+argument, which the command line shows as its option). Long work reports through a
+:class:`~thermodepth.progress.Reporter`.
+
+=====================  ======================================================================
+module                 use cases
+=====================  ======================================================================
+:mod:`.run`            ``run`` (fuse a stream into measurements, with the sinks it asks for)
+:mod:`.record`         ``record`` (a source into a crash-safe recording)
+:mod:`.calibrate`      ``calibrate``, ``check_calibration``
+:mod:`.compensation`   ``fit_compensation``, ``compensate_file``, ``evaluate``, ``paper_tables``
+:mod:`.simulate`       ``sweep``, ``frames``, ``targets`` on the simulated rig
+:mod:`.temperature`    ``counts_to_celsius``
+:mod:`.devices`        ``list_devices``, ``describe_devices``
+:mod:`.demo`           ``run_demo``: the whole story on the simulated rig
+=====================  ======================================================================
+"""

@@ -1,0 +1,105 @@
+"""``thermodepth run``: fuse a stream into measurements, with the outputs the options ask for."""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .. import sources
+from ..calibration import Calibration
+from ..errors import FieldError, check_count
+from ..pipeline import Pipeline, Settings
+from ..session import RunResult, Sink, run_session
+from ..sinks import MeasurementsSink, RecorderSink
+from ..sources.pairing import DEFAULT_MAX_SKEW_S
+
+Warn = Callable[[str], None]
+"""Where one-line warnings go (the command line prints them in yellow)."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """What a run reads and where it writes.
+
+    source: a source spec (``sim``, ``realsense+lepton``, ``recording:PATH``; see
+    :func:`~thermodepth.sources.open_source`); settings: the settings YAML (None: defaults);
+    frames: stop after so many pairs (None: at the source's end); out_dir: write the
+    measurements there; record: also record everything into this new recording;
+    max_skew_s: the pairing threshold (s); thermal_latency_s: subtracted from the Lepton's
+    arrival times (s).
+    """
+
+    source: str = "sim"
+    settings: Path | None = None
+    frames: int | None = None
+    out_dir: Path | None = None
+    record: Path | None = None
+    max_skew_s: float = DEFAULT_MAX_SKEW_S
+    thermal_latency_s: float = 0.0
+
+    def check(self) -> None:
+        """One FieldError for an option that cannot be."""
+        check_count("frames", self.frames)
+        check_timing(self.max_skew_s, self.thermal_latency_s)
+
+
+def check_timing(max_skew_s: float, thermal_latency_s: float) -> None:
+    """Pairing options of live sources: both durations >= 0 (FieldError otherwise)."""
+    for name, value in (("max_skew_s", max_skew_s), ("thermal_latency_s", thermal_latency_s)):
+        if not value >= 0:
+            raise FieldError(name, "must be >= 0")
+
+
+SINK_BUILDERS: list[Callable[[RunOptions], Sink | None]] = [
+    lambda o: MeasurementsSink(o.out_dir) if o.out_dir is not None else None,
+    lambda o: RecorderSink(o.record) if o.record is not None else None,
+]
+"""The sinks a run's options ask for, one builder each (None: not asked for)."""
+
+
+def provenance(settings_path: Path | None, settings: Settings) -> dict[str, Any]:
+    """What a recording made by a run stores of the pipeline: the settings file's path and
+    text, and the compensation model's path and SHA-256."""
+    out: dict[str, Any] = {"settings_file": None, "settings_yaml": None}
+    if settings_path is not None:
+        out["settings_file"] = str(settings_path)
+        out["settings_yaml"] = Path(settings_path).read_text(encoding="utf-8")
+    if settings.compensation is not None:
+        out["compensation_model"] = str(settings.compensation)
+        out["compensation_sha256"] = hashlib.sha256(
+            Path(settings.compensation).read_bytes()
+        ).hexdigest()
+    return {"pipeline": out}
+
+
+def run(options: RunOptions, sinks: Sequence[Sink] = (), warn: Warn | None = None) -> RunResult:
+    """Check the options and every output (before any camera starts), open the source and
+    the pipeline, then :func:`~thermodepth.session.run_session` with the sinks the options
+    ask for followed by ``sinks`` (the source is closed in every case)."""
+    options.check()
+    settings = Settings.load(options.settings) if options.settings else Settings()
+    cal = Calibration.load(settings.calibration) if settings.calibration else None
+    outputs = [s for build in SINK_BUILDERS if (s := build(options)) is not None]
+    all_sinks = [*outputs, *sinks]
+    for sink in all_sinks:
+        sink.check()
+    src = sources.open_source(
+        options.source,
+        cal,
+        frames=options.frames,
+        max_skew_s=options.max_skew_s,
+        thermal_latency_s=options.thermal_latency_s,
+        warn=warn,
+    )
+    try:
+        src.require_pairs()
+        # the source's calibration, else the settings'; Pipeline refuses when neither has one
+        pipeline = Pipeline(settings, src.calibration or cal)
+        recorded = provenance(options.settings, settings)
+    except BaseException:
+        src.close()
+        raise
+    return run_session(src, pipeline, frames=options.frames, sinks=all_sinks, provenance=recorded)

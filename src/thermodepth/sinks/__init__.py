@@ -1,0 +1,15 @@
+"""Sinks: what consumes a session (:class:`~thermodepth.session.Sink`), one file each.
+
+- :class:`RecorderSink` (:mod:`.recorder`): every raw event into a recording;
+- :class:`MeasurementsSink` (:mod:`.measurements`): measurements, alarms and hotspots files;
+- :class:`CallbackSink` (:mod:`.callback`): a function called with each fused frame.
+
+A new sink is a :class:`~thermodepth.session.BaseSink` subclass in its own file here; the
+application's ``run`` builds the sinks its options ask for (``thermodepth.app.run``).
+"""
+
+from .callback import CallbackSink
+from .measurements import MeasurementsSink
+from .recorder import RecorderSink
+
+__all__ = ["CallbackSink", "MeasurementsSink", "RecorderSink"]
