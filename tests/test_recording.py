@@ -197,18 +197,18 @@ def test_missing_chunk_is_caught_by_the_checksum(tmp_path: Path) -> None:
 KILL_SCRIPT = """
 import os, signal, sys
 import zarr
-from thermodepth.io import recording
+from thermodepth.io.recording import format, writer
 from thermodepth.cli import main
 
 out, where, at = sys.argv[1], sys.argv[2], int(sys.argv[3])
-recording.FIRST_CAPACITY = 4  # arrays grow at rows 4, 8, 16, ...
+format.FIRST_CAPACITY = 4  # arrays grow at rows 4, 8, 16, ...
 
 
 def kill():
     os.kill(os.getpid(), signal.SIGKILL)
 
 
-write, resize = recording._TableWriter.write, zarr.Array.resize
+write, resize = writer._TableWriter.write, zarr.Array.resize
 
 
 def write_hook(self, row, values):
@@ -223,7 +223,7 @@ def resize_hook(self, shape):
     resize(self, shape)
 
 
-recording._TableWriter.write = write_hook
+writer._TableWriter.write = write_hook
 zarr.Array.resize = resize_hook
 sys.argv = ["thermodepth", "record", "--source", "sim", "-o", out, "--frames", "100"]
 main()

@@ -1,0 +1,322 @@
+"""Reading recordings: what was committed, found on open, and the frames and pairs replayed
+bit for bit, corrupt ones skipped and counted (:class:`Recording`)."""
+
+from __future__ import annotations
+
+import heapq
+import re
+import warnings
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zarr
+from numpy.typing import NDArray
+
+from ...calibration import Calibration
+from ...errors import InputError
+from ...frames import DepthFrame, FramePair, Match, ThermalFrame, pair_of
+from .format import (
+    FORMAT,
+    VERSION,
+    CorruptFrameError,
+    RecordingWarning,
+    checksum,
+    short_error,
+    telemetry_from_row,
+)
+
+
+@dataclass
+class _Table:
+    """A meta or pair table as found on open: ``rows`` up to the last committed one (rows that
+    could not be read filled like rows never written); ``missing``: rows below it never
+    written, or whose chunk file is gone; ``unreadable``: rows whose chunk is corrupt (below
+    or past the last committed row)."""
+
+    rows: NDArray[Any]
+    missing: set[int]
+    unreadable: set[int]
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def check(self, row: int, what: str) -> None:
+        """Raise CorruptFrameError (``reported``: warned about on open) if ``row`` cannot be
+        used; ``what`` names it (``"depth frame 3: meta row"``)."""
+        if row in self.unreadable:
+            raise CorruptFrameError(f"{what} unreadable (corrupt chunk)", reported=True)
+        if not 0 <= row < len(self.rows) or row in self.missing:
+            raise CorruptFrameError(f"{what} missing", reported=row in self.missing)
+
+    def problems(self) -> list[str]:
+        """One phrase per run of missing or unreadable rows below the end: ``rows 0-255
+        unreadable (corrupt chunk)``."""
+        out = []
+        for rows, why in (
+            (self.unreadable, "unreadable (corrupt chunk)"),
+            (self.missing, "missing"),
+        ):
+            for a, b in _runs(sorted(rows)):
+                out.append(f"{'row' if a == b else 'rows'} {a if a == b else f'{a}-{b}'} {why}")
+        return out
+
+
+def _runs(rows: list[int]) -> list[tuple[int, int]]:
+    """Consecutive runs of sorted integers as (first, last)."""
+    runs: list[tuple[int, int]] = []
+    for r in rows:
+        if runs and r == runs[-1][1] + 1:
+            runs[-1] = (runs[-1][0], r)
+        else:
+            runs.append((r, r))
+    return runs
+
+
+_EMPTY_TABLE = _Table(np.zeros((0, 0)), set(), set())
+
+
+def _read_table(
+    array: zarr.Array, absent: Callable[[NDArray[Any]], NDArray[np.bool_]], fill: Any
+) -> _Table:
+    """Read a meta or pair table in bulk (chunk by chunk if a chunk is corrupt). A row is
+    committed when ``absent(rows)`` is False for it; the table ends at the last committed
+    row."""
+    try:
+        rows = np.asarray(array[:])
+        unreadable = np.zeros(len(rows), dtype=bool)
+    except Exception:  # a corrupt chunk: read around it
+        parts, flags = [], []
+        step = array.chunks[0]
+        for a in range(0, array.shape[0], step):
+            b = min(a + step, array.shape[0])
+            try:
+                parts.append(np.asarray(array[a:b]))
+                flags.append(np.zeros(b - a, dtype=bool))
+            except Exception:
+                parts.append(np.full((b - a, *array.shape[1:]), fill, dtype=array.dtype))
+                flags.append(np.ones(b - a, dtype=bool))
+        rows = np.concatenate(parts) if parts else np.zeros((0, *array.shape[1:]), array.dtype)
+        unreadable = np.concatenate(flags) if flags else np.zeros(0, dtype=bool)
+    missing = absent(rows) & ~unreadable
+    good = np.flatnonzero(~(missing | unreadable))
+    n = int(good[-1]) + 1 if good.size else 0
+    return _Table(
+        rows[:n],
+        {int(i) for i in np.flatnonzero(missing[:n])},
+        {int(i) for i in np.flatnonzero(unreadable)},
+    )
+
+
+def _nan_rows(rows: NDArray[Any]) -> NDArray[np.bool_]:
+    return np.isnan(rows[:, 0])
+
+
+def _negative_rows(rows: NDArray[Any]) -> NDArray[np.bool_]:
+    return rows[:, 0] < 0
+
+
+class Recording:
+    """A recording opened for reading.
+
+    Counts are those of the frames fully written (found from the commit markers, so a killed
+    recording opens with every completed frame); the meta and pair tables are read once, in
+    bulk, on open. ``pairs()`` yields the recorded FramePairs bit for bit; a frame that cannot
+    be read is skipped with one warning (``warn``, default :class:`RecordingWarning`) and
+    counted in ``skipped``. Unreadable array metadata (a corrupt ``zarr.json``) is a one-line
+    InputError naming the array.
+    """
+
+    def __init__(self, path: str | Path, warn: Callable[[str], None] | None = None) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise InputError(f"{self.path}: no such recording")
+        try:
+            self.root = zarr.open_group(str(self.path), mode="r", zarr_format=3)
+            attrs = dict(self.root.attrs)
+        except Exception as exc:
+            raise InputError(
+                f"{self.path}: not a readable Zarr v3 store ({short_error(exc)})"
+            ) from None
+        if attrs.get("format") != FORMAT:
+            raise InputError(f"{self.path}: not a thermodepth recording (no format attribute)")
+        if attrs.get("version") != VERSION:
+            raise InputError(
+                f"{self.path}: recording version {attrs.get('version')} is not supported "
+                f"(expected {VERSION})"
+            )
+        self.attrs = attrs
+        self.warn = warn or (lambda msg: warnings.warn(msg, RecordingWarning, stacklevel=3))
+        self.skipped = 0
+        self._arrays: dict[str, zarr.Array] = {}
+        for name in (
+            "depth/image",
+            "depth/ir",
+            "depth/meta",
+            "thermal/image",
+            "thermal/meta",
+            "pairs",
+        ):
+            try:
+                node = self.root[name]
+            except KeyError:
+                continue
+            except Exception as exc:
+                raise InputError(
+                    f"{self.path}: {name}/zarr.json is unreadable ({short_error(exc)})"
+                ) from None
+            if isinstance(node, zarr.Array):
+                self._arrays[name] = node
+        self._depth = self._table("depth/meta", _nan_rows, np.nan)
+        self._thermal = self._table("thermal/meta", _nan_rows, np.nan)
+        self._pairs = self._table("pairs", _negative_rows, -1)
+        for name, table in (
+            ("depth/meta", self._depth),
+            ("thermal/meta", self._thermal),
+            ("pairs", self._pairs),
+        ):
+            for problem in table.problems():
+                self.warn(f"{self.path}: {name} {problem}: the frames and pairs there are skipped")
+        self.n_depth, self.n_thermal, self.n_pairs = (
+            len(self._depth),
+            len(self._thermal),
+            len(self._pairs),
+        )
+        for stream, n in (("depth", self.n_depth), ("thermal", self.n_thermal)):
+            if n and f"{stream}/image" not in self._arrays:
+                raise InputError(
+                    f"{self.path}: {stream}/image/zarr.json is missing: the {n} {stream} "
+                    "frames the recording lists cannot be read"
+                )
+        self.calibration = (
+            Calibration.from_dict(attrs["calibration"], source=f"{self.path} (calibration)")
+            if attrs.get("calibration")
+            else None
+        )
+
+    def _table(
+        self, name: str, absent: Callable[[NDArray[Any]], NDArray[np.bool_]], fill: Any
+    ) -> _Table:
+        array = self._arrays.get(name)
+        return _EMPTY_TABLE if array is None else _read_table(array, absent, fill)
+
+    @property
+    def complete(self) -> bool:
+        """True when the recording was closed (False: the recorder was killed)."""
+        return bool(self.attrs.get("complete"))
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        settings = self.attrs.get("settings")
+        return dict(settings) if isinstance(settings, dict) else {}
+
+    @property
+    def device_depth(self) -> dict[str, Any] | None:
+        """The depth camera's own intrinsics and depth unit (a calibration file's ``depth``
+        section), when the recording holds them."""
+        value = self.attrs.get("device_depth")
+        return dict(value) if isinstance(value, dict) else None
+
+    @property
+    def dropped(self) -> dict[str, int]:
+        """Events the recorder dropped while recording (depth, thermal, pairs); empty when the
+        recording was not closed (the counts are stored on close)."""
+        recorder = self.attrs.get("recorder")
+        value = recorder.get("dropped") if isinstance(recorder, dict) else None
+        return {str(k): int(v) for k, v in value.items()} if isinstance(value, dict) else {}
+
+    @property
+    def with_ir(self) -> bool:
+        return "depth/ir" in self._arrays
+
+    def _read(
+        self, stream: str, row: int, names: tuple[str, ...]
+    ) -> tuple[NDArray[np.float64], list[NDArray[Any]]]:
+        """Frame ``row`` of ``stream``: its meta row and its arrays ``names``, checked against
+        the CRC; CorruptFrameError if they cannot be read or do not match."""
+        table = self._depth if stream == "depth" else self._thermal
+        table.check(row, f"{stream} frame {row}: meta row")
+        meta = table.rows[row]
+        try:
+            arrays = [np.asarray(self._arrays[f"{stream}/{n}"][row]) for n in names]
+        except Exception as exc:
+            raise CorruptFrameError(
+                f"{stream} frame {row}: unreadable chunk ({short_error(exc)})"
+            ) from None
+        if checksum(*arrays) != int(meta[2]):
+            raise CorruptFrameError(f"{stream} frame {row}: pixels do not match their CRC-32")
+        return meta, arrays
+
+    def depth_frame(self, row: int) -> DepthFrame:
+        """The depth frame at ``row``; CorruptFrameError if it cannot be read or fails its CRC."""
+        meta, arrays = self._read("depth", row, ("image", "ir") if self.with_ir else ("image",))
+        ir = arrays[1] if self.with_ir else None
+        return DepthFrame(arrays[0], float(meta[0]), int(meta[1]), ir)
+
+    def thermal_frame(self, row: int) -> ThermalFrame:
+        """The thermal frame at ``row`` with its telemetry; CorruptFrameError as depth_frame."""
+        meta, (counts,) = self._read("thermal", row, ("image",))
+        return ThermalFrame(counts, float(meta[0]), int(meta[1]), telemetry_from_row(meta[3:]))
+
+    def _readable(self, rows: Iterable[Any], what: str, read: Callable[..., Any]) -> Iterator[Any]:
+        """``read(*row)`` for each row; unreadable ones skipped and counted: one warning line
+        per run of consecutive rows skipped for the same cause (none for a table chunk
+        warned about on open)."""
+        run: list[Any] = []  # [first, last, cause, first message] of the skips not yet told
+
+        def tell() -> None:
+            if run:
+                first, last, _, message = run
+                rows = f"{what} {first}" if first == last else f"{what}s {first}-{last}"
+                alike = "" if first == last else f" (and alike for the {last - first} after)"
+                self.warn(f"{self.path}: {rows} skipped: {message}{alike}")
+                run.clear()
+
+        try:
+            for i, row in enumerate(rows):
+                try:
+                    item = read(*row)
+                except CorruptFrameError as exc:
+                    self.skipped += 1
+                    if not exc.reported:
+                        cause = re.sub(r"\d+", "#", str(exc))  # the same cause, another frame
+                        if run and run[2] == cause and run[1] == i - 1:
+                            run[1] = i
+                        else:
+                            tell()
+                            run.extend([i, i, cause, str(exc)])
+                    continue
+                tell()
+                yield item
+        finally:  # also when the reader stops early
+            tell()
+
+    def matches(self) -> Iterator[Match]:
+        """Every recorded pair with its frames, in order; unreadable ones skipped and
+        counted (one warning line each, or one per table chunk warned about on open)."""
+
+        def read(i: int, d_row: int, t_row: int, index: int) -> Match:
+            self._pairs.check(i, "pair row")
+            d = self.depth_frame(int(d_row))
+            t = self.thermal_frame(int(t_row))
+            return Match(d, t, pair_of(d, t, int(index)))
+
+        rows = ((i, *row) for i, row in enumerate(self._pairs.rows.tolist()))
+        yield from self._readable(rows, "pair", read)
+
+    def frames(self) -> Iterator[DepthFrame | ThermalFrame]:
+        """Every recorded depth and thermal frame, in time order (what a recording of one
+        camera holds: it has no pairs); unreadable ones skipped and counted as in
+        :meth:`matches`."""
+        depth = self._readable(((r,) for r in range(self.n_depth)), "depth frame", self.depth_frame)
+        thermal = self._readable(
+            ((r,) for r in range(self.n_thermal)), "thermal frame", self.thermal_frame
+        )
+        yield from heapq.merge(depth, thermal, key=lambda f: f.time_s)
+
+    def pairs(self) -> Iterator[FramePair]:
+        """The recorded FramePairs, bit for bit (see :meth:`matches`)."""
+        for m in self.matches():
+            yield m.pair
