@@ -25,7 +25,7 @@ shows the spinning layer: ~10 % faster on a quiet machine). The 1-thread rows
 (numba.set_num_threads(1)) are stable from run to run and compare the same work per core:
 rs.align, registerDepth and numpy run on one thread.
 
-Also reported: the agreement between the contenders (bench/peers.py says what each computes)
+Also reported: the agreement between the contenders (tests/peers.py says what each computes)
 and numba's compile time (first call in a fresh process, cache empty vs cached).
 """
 
@@ -45,13 +45,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 from rich.markup import escape
-
-from thermodepth.camera import RigidTransform
-from thermodepth.registration import Reason, Registration
-from thermodepth.sim import Rig, default_calibration, occlusion_scene
-
-from .common import Timing, counting, measure, report
-from .peers import (
+from tests.peers import (
     RsAlign,
     border_exclusions,
     depth_frame_z,
@@ -65,6 +59,12 @@ from .peers import (
     thermal_to_depth_agreement,
     without_thermal_distortion,
 )
+
+from thermodepth.camera import RigidTransform
+from thermodepth.registration import Reason, Registration
+from thermodepth.sim import Rig, default_calibration, occlusion_scene
+
+from .common import Timing, counting, measure, report
 
 N_FRAMES = 4
 ROUNDS = 20
@@ -170,7 +170,7 @@ def _contenders(
 def _agreement(
     reg: Registration, depth: NDArray[np.uint16], aligner: RsAlign | None
 ) -> dict[str, str]:
-    """How far the contenders agree on one frame (definitions in bench/peers.py)."""
+    """How far the contenders agree on one frame (definitions in tests/peers.py)."""
     cal = reg.calibration
     index = thermal_index_image(cal)
     ours_d2t = reg.depth_to_thermal(depth)

@@ -1,8 +1,8 @@
-"""Registration peers (bench/peers.py).
+"""Registration peers (tests/peers.py).
 
 The float64 numpy reference holds the numba kernels of thermodepth.registration to account;
 librealsense's rs.align and OpenCV's registerDepth agree with them in the ways documented in
-bench/peers.py (measured here on the simulated rig: a hot box 0.8 m in front of a wall).
+tests/peers.py (measured here on the simulated rig: a hot box 0.8 m in front of a wall).
 """
 
 from __future__ import annotations
@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from bench.peers import (
+from numpy.typing import NDArray
+
+from peers import (
     RsAlign,
     border_exclusions,
     depth_frame_z,
@@ -29,8 +31,6 @@ from bench.peers import (
     thermal_to_depth_agreement,
     without_thermal_distortion,
 )
-from numpy.typing import NDArray
-
 from thermodepth.calibration import Calibration
 from thermodepth.camera import Intrinsics, RigidTransform, rotation_from_euler
 from thermodepth.registration import Reason, Registration

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bench.peers import near_pixel_border, nearest_index
 
+from peers import near_pixel_border, nearest_index
 from thermodepth.calibration import Calibration
 from thermodepth.camera import Intrinsics, RigidTransform, rotation_from_euler
 from thermodepth.evaluation import registration_error

@@ -1,4 +1,5 @@
-"""Peers of :mod:`thermodepth.registration` for the registration benchmark and its tests.
+"""Peers of :mod:`thermodepth.registration` for its tests and the registration benchmark
+(``bench/bench_registration.py`` imports them from here).
 
 Plain functions (and one small class); none of them times itself, the caller does.
 
