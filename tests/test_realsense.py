@@ -20,9 +20,14 @@ from thermodepth.sim import Rig, camera_pose, plate_scene
 from thermodepth.sim.rig import default_calibration
 from thermodepth.sources import open_source
 
-rs = pytest.importorskip(
-    "pyrealsense2", reason="pyrealsense2 cannot be imported (not installed, or no libusb-1.0)"
-)
+try:  # pyrealsense2 loads the system library libusb-1.0 on import: ImportError without it
+    import pyrealsense2 as rs
+except ImportError as exc:
+    pytest.skip(
+        f"pyrealsense2 cannot be imported ({exc}); it needs pip install 'thermodepth[realsense]' "
+        "and the system library libusb-1.0-0 (Debian: apt-get install libusb-1.0-0)",
+        allow_module_level=True,
+    )
 from thermodepth.sources.realsense import RealSenseCamera  # noqa: E402
 
 DEPTH_UNIT_M = 0.0001  # not the D435's 1 mm, so that reading it back is a real check
