@@ -312,3 +312,70 @@ def test_missing_lepton_is_one_line_without_opencv_warnings(
     proc = cli_process("record", "-s", "lepton:57", "-o", str(tmp_path / "l.zarr"))
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == ["error: /dev/video57: cannot open (no such device)"]
+
+
+# -- what a new user found --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["run", "--frames", "-1"], "--frames: must be at least 1, got -1"),
+        (["run", "--frames", "0"], "--frames: must be at least 1, got 0"),
+        (["simulate", "sweep", "-o", "{tmp}/s.csv", "--samples", "0"], "--samples: must be"),
+        (["simulate", "frames", "-o", "{tmp}/f", "--frames", "-2"], "--frames: must be at"),
+        (["simulate", "targets", "-o", "{tmp}/t", "--poses", "0"], "--poses: must be at least"),
+    ],
+)
+def test_every_count_option_is_checked_the_same_way(
+    tmp_path: Path, args: list[str], message: str
+) -> None:
+    result = runner.invoke(app, [a.format(tmp=tmp_path) for a in args])
+    assert result.exit_code == 2, result.output
+    assert result.output.strip().startswith(f"error: {message}")
+    assert not any(tmp_path.iterdir())  # nothing written
+
+
+def test_a_calibration_cut_short_names_no_internal_class(tmp_path: Path) -> None:
+    text = EXAMPLE.read_text()
+    cut = tmp_path / "cut.yaml"
+    cut.write_text(text[: text.index("thermal:") + len("thermal:")] + "\n")
+    result = runner.invoke(app, ["check-calibration", str(cut)])
+    assert result.exit_code == 2
+    assert result.output.strip() == (
+        f"error: {cut}: thermal: expected a mapping of keys, got nothing [and 1 more problem]"
+    )
+
+
+def test_sim_and_recording_runs_end_with_their_pairs_skew(tmp_path: Path) -> None:
+    out = tmp_path / "r.zarr"
+    rec = runner.invoke(app, ["record", "-s", "sim", "-o", str(out), "--frames", "3"])
+    assert rec.exit_code == 0, rec.output
+    run = runner.invoke(app, ["run", "--source", f"recording:{out}", "--quiet"])
+    assert run.exit_code == 0, run.output
+    lines = []
+    for output, who in ((rec.output, "the simulator"), (run.output, "the recorded run")):
+        line = next(x for x in output.splitlines() if x.startswith("pairing"))
+        assert line.startswith(f"pairing (paired by {who}): pairs 3, |skew| median ")
+        lines.append(line.split(": ", 1)[1])
+    assert lines[0] == lines[1]  # the replay's skews are the recording's
+
+
+@pytest.mark.parametrize(
+    "command", ["run", "record", "calibrate", "fit-compensation", "temperature"]
+)
+def test_help_reads_as_text(command: str) -> None:
+    result = runner.invoke(app, [command, "--help"], env={"COLUMNS": "80"})
+    assert result.exit_code == 0
+    assert "<bool>" not in result.output
+    assert max(len(line) for line in result.output.splitlines()) <= 80
+    words = " ".join(result.output.split())
+    # a help text wrapped at words reads whole once the line breaks are joined
+    helps = {
+        "run": "Write measurements.jsonl, alarms.jsonl and hotspots.csv here.",
+        "record": "Replace an existing recording (nothing else).",
+        "calibrate": "Hold the depth camera's intrinsics fixed: a calibration file (its depth",
+        "fit-compensation": "paper: the reference temperature (C) to fit at (default 39 if",
+        "temperature": "Reflected apparent temperature, C (default: the air's).",
+    }
+    assert helps[command] in words

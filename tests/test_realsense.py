@@ -28,7 +28,7 @@ except ImportError as exc:
         "and the system library libusb-1.0-0 (Debian: apt-get install libusb-1.0-0)",
         allow_module_level=True,
     )
-from thermodepth.sources.realsense import RealSenseCamera  # noqa: E402
+from thermodepth.sources.realsense import RealSenseCamera
 
 DEPTH_UNIT_M = 0.0001  # not the D435's 1 mm, so that reading it back is a real check
 

@@ -50,7 +50,7 @@ class RecordingSource(Source):
         if self.recording.n_thermal:
             streams.add("thermal")
         self.streams = frozenset(streams) if self.recording.n_pairs == 0 else self.streams
-        self.paired_by = "the live run (as recorded)"
+        self.paired_by = "the recorded run"
         self.pairer: StreamPairer | None = None
         if self.streams == {"depth", "thermal"} and not self.recording.n_pairs:
             skew = self.recording.settings.get("max_skew_s", DEFAULT_MAX_SKEW_S)

@@ -1,0 +1,19 @@
+"""The ``thermodepth`` command line: typer signatures and rich printing over the application
+layer (:mod:`thermodepth.app`), which does the work.
+
+Each command parses its options, calls one plain function and prints what it returns. Errors
+are one red line: a :class:`~thermodepth.errors.FieldError` is shown with the option that
+gave the field (``--emissivity: ...``). One module per group of commands; :mod:`.base` holds
+the app, the error handling and the shared options.
+"""
+
+from . import calibrate, compensation, measure, simulate
+from .base import app
+from .measure import print_frame
+
+__all__ = ["app", "calibrate", "compensation", "main", "measure", "print_frame", "simulate"]
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()

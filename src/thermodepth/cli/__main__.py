@@ -1,0 +1,5 @@
+"""``python -m thermodepth.cli``: the command line."""
+
+from . import main
+
+main()

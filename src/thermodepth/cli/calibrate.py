@@ -1,0 +1,173 @@
+"""``check-calibration`` and ``calibrate``: calibration files and board calibration."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+from rich.table import Table
+
+from .base import (
+    BARS,
+    Board,
+    app,
+    console,
+    one_line_errors,
+    print_json,
+)
+
+if TYPE_CHECKING:
+    from ..calibrate import CalibrationResult
+
+
+@app.command("check-calibration")
+@one_line_errors
+def check_calibration_cmd(
+    path: Annotated[Path, typer.Argument(help="Calibration file (.yaml, .yml or .json).")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Validate a calibration file and summarise it (sizes, baseline, rotation)."""
+    from ..app.calibrate import check_calibration
+
+    summary = check_calibration(path)
+    if as_json:
+        print_json(summary)
+        return
+    table = Table(title=f"{path}: valid", show_header=False)
+    for key, value in summary.items():
+        table.add_row(key, str(value))
+    console.print(table)
+
+
+@app.command("calibrate")
+@one_line_errors
+def calibrate_cmd(
+    pairs_dir: Annotated[
+        Path,
+        typer.Argument(
+            help="Folder of image pairs: <stem>_ir|_color|_rgb + <stem>_thermal, or "
+            "left<key> (depth camera) + right<key> (thermal); PNG, TIFF, JPEG or .npy."
+        ),
+    ],
+    square_m: Annotated[
+        float, typer.Option("--square-m", help="Square size (circle grid step), metres.")
+    ],
+    board: Board = "checkerboard:9x6",
+    out: Annotated[Path, typer.Option("-o", "--out", help="Calibration file to write.")] = Path(
+        "calib.yaml"
+    ),
+    depth_intrinsics: Annotated[
+        Path | None,
+        typer.Option(
+            help="Hold the depth camera's intrinsics fixed: a calibration file (its depth "
+            "section) or a YAML/JSON of width, height, fx, fy, cx, cy, distortion."
+        ),
+    ] = None,
+    depth_scale_m: Annotated[
+        float | None,
+        typer.Option(help="Depth unit, m (default: from --depth-intrinsics, else 0.001)."),
+    ] = None,
+    thermal_model: Annotated[
+        str, typer.Option(help="Thermal distortion terms: no-k3, radial, full or none.")
+    ] = "no-k3",
+    depth_model: Annotated[
+        str, typer.Option(help="Depth camera distortion terms: radial, no-k3, full or none.")
+    ] = "radial",
+    thermal_refine: Annotated[
+        str,
+        typer.Option(
+            help="Thermal corner refinement: homography (fronto-parallel) or cornersubpix."
+        ),
+    ] = "homography",
+    drop_outliers: Annotated[
+        bool, typer.Option("--drop-outliers", help="Fit again without the outlier images.")
+    ] = False,
+    report_dir: Annotated[
+        Path | None,
+        typer.Option(help="Where to write calib_report.json/.png (default: next to --out)."),
+    ] = None,
+) -> None:
+    """Calibrate the depth + thermal pair from board captures: thermal (and depth)
+    intrinsics and thermal_from_depth, with a quality report."""
+    from ..app.calibrate import CalibrateOptions, calibrate
+
+    options = CalibrateOptions(
+        pairs_dir,
+        square_m,
+        board,
+        out,
+        depth_intrinsics,
+        depth_scale_m,
+        thermal_model,
+        depth_model,
+        thermal_refine,
+        drop_outliers,
+        report_dir,
+    )
+    outcome = calibrate(options, BARS)
+    print_calibration_report(outcome.result)
+    console.print(f"wrote {', '.join(map(str, outcome.files))}", highlight=False)
+
+
+def print_calibration_report(result: CalibrationResult) -> None:
+    """The terminal report of a calibration: the fit, per-image errors, skipped files."""
+    rep = result.report_dict()
+    d, t, st = rep["depth_camera"], rep["thermal_camera"], rep["stereo"]
+    summary = Table(title=f"calibration from {rep['pairs_used']} pairs ({rep['board']})")
+    summary.add_column("")
+    summary.add_column("depth camera", justify="right")
+    summary.add_column("thermal camera", justify="right")
+
+    def both(key: str, fmt: str) -> None:
+        summary.add_row(key, fmt.format(d[key]), fmt.format(t[key]))
+
+    summary.add_row("size px", "{}x{}".format(*d["size"]), "{}x{}".format(*t["size"]))
+    summary.add_row("distortion model", d["model"], t["model"])
+    summary.add_row("RMS px", f"{d['rms_px']:.3f}", f"{t['rms_px']:.3f}")
+    for key in ("fx", "fy", "cx", "cy"):
+        both(key, "{:.2f}")
+    summary.add_row(
+        "principal point - centre px",
+        "{:+.2f}, {:+.2f}".format(*d["principal_point_offset_px"]),
+        "{:+.2f}, {:+.2f}".format(*t["principal_point_offset_px"]),
+    )
+    summary.add_row(
+        "distortion k1 k2 p1 p2 k3",
+        " ".join(f"{k:.4g}" for k in d["distortion"]),
+        " ".join(f"{k:.4g}" for k in t["distortion"]),
+    )
+    summary.add_row(
+        "corner coverage",
+        f"{rep['coverage']['depth_fraction']:.0%}",
+        f"{rep['coverage']['thermal_fraction']:.0%}",
+    )
+    summary.add_section()
+    summary.add_row("stereo rms px", f"{st['rms_px']:.3f}", "")
+    summary.add_row("baseline mm", f"{st['baseline_mm']:.2f}", "")
+    summary.add_row("translation mm", ", ".join(f"{v:.2f}" for v in st["translation_mm"]), "")
+    summary.add_row("rotation deg", f"{st['rotation_deg']:.3f}", "")
+    console.print(summary)
+
+    per = Table(title="RMS reprojection error per image, px")
+    for col in ("pair", "depth", "thermal", "stereo depth", "stereo thermal", ""):
+        per.add_column(col, justify="left" if col == "pair" else "right")
+    for row in rep["per_image"]:
+        per.add_row(
+            row["name"],
+            f"{row['depth_rms_px']:.3f}",
+            f"{row['thermal_rms_px']:.3f}",
+            f"{row['stereo_depth_rms_px']:.3f}",
+            f"{row['stereo_thermal_rms_px']:.3f}",
+            "[red]outlier[/red]" if row["outlier"] else "",
+        )
+    console.print(per)
+    console.print(f"outliers: {rep['outlier_rule']}", highlight=False)
+    if rep["dropped_outliers"]:
+        console.print(f"dropped: {', '.join(rep['dropped_outliers'])}", highlight=False)
+    for s in rep["skipped"]:
+        console.print(f"[yellow]skipped[/yellow] {s['name']}: {s['reason']}", highlight=False)
+    for u in rep["unmatched"]:
+        console.print(f"[yellow]not paired[/yellow] {u['file']}: {u['reason']}", highlight=False)
+    for w in rep["warnings"]:
+        console.print(f"[yellow]warning:[/yellow] {w}", highlight=False)

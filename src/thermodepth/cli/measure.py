@@ -1,0 +1,192 @@
+"""``devices``, ``record`` and ``run``: cameras, recordings and the live measuring run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+from rich.markup import escape
+
+from ..errors import ThermodepthError
+from .base import (
+    BARS,
+    MaxSkewMs,
+    ThermalLatencyMs,
+    app,
+    console,
+    one_line_errors,
+    print_json,
+    warn_line,
+)
+
+if TYPE_CHECKING:
+    from ..pipeline import FusedFrame
+    from ..session import SessionResult
+
+
+@app.command("devices")
+@one_line_errors
+def devices_cmd(
+    as_json: Annotated[bool, typer.Option("--json", help="Print as JSON.")] = False,
+) -> None:
+    """List attached RealSense cameras and PureThermal (Lepton) boards."""
+    from ..app.devices import describe_devices, list_devices
+
+    found = list_devices()
+    if as_json:
+        print_json(found)
+        return
+    for line in describe_devices(found):
+        console.print(line, highlight=False, soft_wrap=True)
+
+
+@app.command("record")
+@one_line_errors
+def record_cmd(
+    source: Annotated[
+        str,
+        typer.Option(
+            "--source",
+            "-s",
+            help="sim, realsense[:SERIAL|:FILE], lepton[:N], realsense+lepton, recording:PATH.",
+        ),
+    ],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Recording to create (.zarr).")],
+    duration: Annotated[
+        float | None, typer.Option("--duration", help="Stop after so many seconds.")
+    ] = None,
+    frames: Annotated[
+        int | None, typer.Option("--frames", help="Stop after so many pairs (or frames).")
+    ] = None,
+    calibration: Annotated[
+        Path | None,
+        typer.Option(
+            help="Calibration file (thermal intrinsics, extrinsics) to store; a RealSense's "
+            "own depth intrinsics replace its depth section (sim and recordings keep theirs)."
+        ),
+    ] = None,
+    max_skew_ms: MaxSkewMs = 20.0,
+    thermal_latency_ms: ThermalLatencyMs = 0.0,
+    ir: Annotated[bool, typer.Option("--ir", help="Also record the infrared image.")] = False,
+    overwrite: Annotated[
+        bool,
+        typer.Option("--overwrite", help="Replace an existing recording (nothing else)."),
+    ] = False,
+) -> None:
+    """Record a source into a crash-safe Zarr v3 recording (Ctrl-C stops cleanly)."""
+    from ..app.record import RecordOptions, record
+
+    options = RecordOptions(
+        source,
+        out,
+        duration,
+        frames,
+        calibration,
+        max_skew_ms / 1000.0,
+        thermal_latency_ms / 1000.0,
+        ir,
+        overwrite,
+    )
+    result = record(options, BARS, warn_line)
+    console.print(
+        f"wrote {out}: {result.recorder.summary()}; stopped: {result.stopped}", soft_wrap=True
+    )
+    print_source_stats(result)
+    if result.error:
+        raise ThermodepthError(f"{result.error}; the recording keeps every frame up to then")
+
+
+def print_source_stats(result: SessionResult) -> None:
+    """The pairing statistics and the source's counters of a session, one line each."""
+    if result.pairing is not None:
+        by = f" (paired by {result.pairing_by})" if result.pairing_by else ""
+        line = result.pairing.summary() if not result.pairing_by else result.pairing.skew_summary()
+        console.print(f"pairing{by}: {line}", soft_wrap=True, highlight=False)
+    if result.counters:
+        counts = ", ".join(f"{k} {v}" for k, v in result.counters.items())
+        console.print(f"source: {counts}", soft_wrap=True, highlight=False)
+
+
+@app.command("run")
+@one_line_errors
+def run_cmd(
+    source: Annotated[
+        str,
+        typer.Option(
+            help="Where frames come from: sim, realsense+lepton, recording:PATH (see README)."
+        ),
+    ] = "sim",
+    settings: Annotated[
+        Path | None, typer.Option(help="Settings YAML (calibration, compensation, rules).")
+    ] = None,
+    record: Annotated[
+        Path | None, typer.Option(help="Also record everything to this .zarr.")
+    ] = None,
+    frames: Annotated[int | None, typer.Option(help="Stop after this many pairs.")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "-o", "--out", help="Write measurements.jsonl, alarms.jsonl and hotspots.csv here."
+        ),
+    ] = None,
+    max_skew_ms: MaxSkewMs = 20.0,
+    thermal_latency_ms: ThermalLatencyMs = 0.0,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No line per frame.")] = False,
+) -> None:
+    """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
+    from ..app.run import RunOptions, run
+    from ..sinks import CallbackSink
+
+    options = RunOptions(
+        source, settings, frames, out, record, max_skew_ms / 1000.0, thermal_latency_ms / 1000.0
+    )
+    result = run(options, [] if quiet else [CallbackSink(print_frame)], warn_line)
+    console.print(
+        f"{result.frames} frames fused ({result.shutter_frames} while the shutter was "
+        f"closed), {sum(e['event'] == 'alarm' for e in result.events)} alarms; "
+        f"stopped: {result.stopped}"
+    )
+    for line in result.outputs:
+        console.print(line, soft_wrap=True, highlight=False)
+    print_source_stats(result)
+    if result.error:
+        raise ThermodepthError(result.error)
+
+
+def _flag_note(flags: int) -> str:
+    """`` [vox_outside]``: the compensation flags a reading carries (beyond what the model
+    was fitted on: a number to doubt), or nothing when it has none."""
+    from ..compensation import names_of
+    from ..pipeline import PixelFlag
+
+    names = names_of(flags, PixelFlag)
+    return f" [{', '.join(names)}]" if names else ""
+
+
+def print_frame(fused: FusedFrame) -> None:
+    """One line per fused frame: time, VOx, the hottest hotspot, ROIs, alarms."""
+    if fused.in_ffc:
+        console.print(
+            f"[dim]frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  shutter "
+            "closed (FFC): not measured[/dim]"
+        )
+        return
+    parts = [
+        f"frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  VOx {fused.vox_temp_c:5.2f} C"
+    ]
+    if fused.hotspots:
+        h = fused.hotspots[0]
+        parts.append(
+            f"hottest {h.max_c:6.2f} C at {h.distance_m:.2f} m "
+            f"({h.area_m2 * 1e4:.1f} cm2{'' if h.resolvable else ', too small'})"
+            + _flag_note(h.flags)
+        )
+    parts += [f"{r.name} {r.mean_c:.2f} C{_flag_note(r.flags)}" for r in fused.rois if r.n]
+    console.print("  ".join(parts), highlight=False, soft_wrap=True, markup=False)
+    for e in fused.events:
+        style = "bold red" if e["event"] == "alarm" else "green"
+        console.print(
+            f"[{style}]{e['event'].upper()} {escape(e['rule'])}: {e['value_c']} C "
+            f"(above {e['above_c']} C for {e['for_frames']} frames)[/{style}]"
+        )
