@@ -1,12 +1,9 @@
-"""Sessions over a source: the loops that ``record`` and ``run`` turn, and the sinks they feed.
+"""Sessions over a source: the loops that ``record`` and ``run`` turn.
 
-A session opens its sinks before any frame flows, feeds them, and closes everything in every
+A session opens its sinks (:class:`~thermodepth.sinks.base.Sink`: the recorder, the
+measurements files, and next the viewer, MQTT and batch outputs) before any frame flows,
+feeds them every event the source emits and every fused frame, and closes everything in every
 case: the source first (no more frames), then the sinks, each told how the session ended.
-
-A **sink** (:class:`Sink`) is whatever consumes a session: the recorder (every raw event the
-source emits), the measurements files, and next the live viewer, MQTT and batch outputs. Each
-is one small object with ``open``, ``event``, ``frame`` and ``close``; a session calls them
-and knows nothing else of them, so a new sink touches neither the pipeline nor this loop.
 
 :func:`record_session` records a source (the recorder is its one sink); :func:`run_session`
 fuses every pair through a :class:`~thermodepth.pipeline.Pipeline` and hands each fused
@@ -19,34 +16,18 @@ from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 from .calibration import Calibration
 from .errors import InputError, ThermodepthError, check_count
 from .frames import DepthFrame, Match, StreamEvent, ThermalFrame
-from .io.measurements import jsonable
 from .io.recording import RecorderStats
-from .pipeline import FusedFrame, Pipeline
+from .pipeline import Pipeline
 from .progress import SILENT, Reporter
+from .sinks.base import RunContext, SessionResult, Sink
+from .sinks.recorder import RecorderSink
 from .sources.base import DeviceLostError, Source, event_time_s
 from .sources.pairing import PairingStats
-
-
-@dataclass(kw_only=True)
-class SessionResult:
-    """What every session reports: why it stopped (``"frames"``, ``"duration"``, ``"end"``
-    (the source ended), ``"interrupted"`` (Ctrl-C), ``"device lost"`` or ``"error"``, with
-    ``error``), the recorder's stats if it recorded, the pairing statistics (of the source's
-    pairing in time; for sources that do not pair, of the pairs the session saw, with
-    ``pairing_by`` saying who paired them) and the source's counters (frames it skipped, by
-    name; see :meth:`~thermodepth.sources.base.Source.counters`)."""
-
-    stopped: str = "end"
-    error: str | None = None
-    recorder: RecorderStats | None = None
-    pairing: PairingStats | None = None
-    pairing_by: str | None = None
-    counters: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(kw_only=True)
@@ -70,62 +51,6 @@ class RunResult(SessionResult):
     outputs: list[str] = field(default_factory=list)
 
 
-@dataclass(frozen=True)
-class RunContext:
-    """What a sink may need to open: the source (its name, calibration, settings, files,
-    whether it is live), the calibration frames are fused with (None when only recording),
-    the pipeline's settings, and ``provenance``: what a recording stores of the run's
-    settings (the settings file's text, the compensation model's hash)."""
-
-    source: Source
-    calibration: Calibration | None = None
-    pipeline: Pipeline | None = None
-    provenance: dict[str, Any] = field(default_factory=dict)
-
-
-class Sink(Protocol):
-    """A consumer of a session (see the module docstring). ``check`` refuses, before any
-    camera starts, what ``open`` would refuse (an output that exists); ``open`` before any
-    frame (it may still refuse with an InputError: nothing has flowed); ``event`` for every
-    event the source emits (raw frames and pairs, in order); ``frame`` for every fused frame
-    (runs only); ``close`` once, in every case, with how the session ended; ``summary`` a
-    line for the user at the end (None: nothing to say)."""
-
-    def check(self) -> None: ...
-
-    def open(self, context: RunContext) -> None: ...
-
-    def event(self, event: StreamEvent) -> None: ...
-
-    def frame(self, fused: FusedFrame) -> None: ...
-
-    def close(self, result: SessionResult) -> None: ...
-
-    def summary(self) -> str | None: ...
-
-
-class BaseSink:
-    """A sink that does nothing: subclasses override what they consume."""
-
-    def check(self) -> None:
-        """Nothing to refuse."""
-
-    def open(self, context: RunContext) -> None:
-        """Nothing to open."""
-
-    def event(self, event: StreamEvent) -> None:
-        """Raw events are not wanted."""
-
-    def frame(self, fused: FusedFrame) -> None:
-        """Fused frames are not wanted."""
-
-    def close(self, result: SessionResult) -> None:
-        """Nothing to close."""
-
-    def summary(self) -> str | None:
-        return None
-
-
 @contextmanager
 def stopping(result: SessionResult) -> Iterator[None]:
     """Ctrl-C and a lost device end a session cleanly: they set ``result.stopped`` (and
@@ -143,27 +68,6 @@ def stopping(result: SessionResult) -> Iterator[None]:
         result.stopped = "error"
         result.error = str(exc)
         raise
-
-
-def closing_attrs(result: SessionResult) -> dict[str, Any]:
-    """The attributes a recording is closed with: ``stopped`` (and ``error``), ``pairing``
-    (pairs, drops, skew in ms) where the source pairs in time, and ``source_counters``."""
-    attrs: dict[str, Any] = {"stopped": result.stopped, "source_counters": dict(result.counters)}
-    if result.error is not None:
-        attrs["error"] = result.error
-    p = result.pairing
-    if p is not None and result.pairing_by is None:
-        attrs["pairing"] = jsonable(
-            {
-                "pairs": p.pairs,
-                "dropped": p.dropped,
-                "thermal_frames": p.thermal_frames,
-                "depth_frames": p.depth_frames,
-                "median_abs_skew_ms": p.median_abs_skew_ms,
-                "max_abs_skew_ms": p.max_abs_skew_ms,
-            }
-        )
-    return attrs
 
 
 @contextmanager
@@ -210,8 +114,6 @@ def record_session(
     the source ends, Ctrl-C, or a device is lost. The source and the recording are closed in
     every case (the recording keeps every frame written). ``reporter`` is told of each unit.
     """
-    from .sinks.recorder import RecorderSink  # the one sink of a recording
-
     check_count("frames", frames)
     unit = _unit_of(source)
     result = RecordResult(path=Path(out), pairing=source.pairing)

@@ -12,8 +12,8 @@ from .. import sources
 from ..calibration import Calibration
 from ..errors import FieldError, check_count
 from ..pipeline import Pipeline, Settings
-from ..session import RunResult, Sink, run_session
-from ..sinks import MeasurementsSink, RecorderSink
+from ..session import RunResult, run_session
+from ..sinks import MeasurementsSink, RecorderSink, Sink
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
 
 Warn = Callable[[str], None]

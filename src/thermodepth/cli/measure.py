@@ -22,7 +22,7 @@ from .base import (
 
 if TYPE_CHECKING:
     from ..pipeline import FusedFrame
-    from ..session import SessionResult
+    from ..sinks import SessionResult
 
 
 @app.command("devices")

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ..pipeline import FusedFrame
-from ..session import BaseSink
+from .base import BaseSink
 
 
 class CallbackSink(BaseSink):

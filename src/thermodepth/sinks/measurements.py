@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..io.measurements import FILES, MeasurementWriter
 from ..pipeline import FusedFrame
-from ..session import BaseSink, RunContext, SessionResult
+from .base import BaseSink, RunContext, SessionResult
 
 
 class MeasurementsSink(BaseSink):

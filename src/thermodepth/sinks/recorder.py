@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..frames import StreamEvent
 from ..io.recording import Recorder, RecorderStats, RecordingWriter, check_output
-from ..session import BaseSink, RunContext, SessionResult, closing_attrs
+from .base import BaseSink, RunContext, SessionResult, closing_attrs
 
 
 class RecorderSink(BaseSink):
