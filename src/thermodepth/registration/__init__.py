@@ -157,8 +157,10 @@ class Registration:
             )
         return self.strategy.thermal_to_depth(depth, therm, interpolation, nearest, thermal_index)
 
-    def thermal_pixel_of_depth(self, depth: NDArray[np.uint16]) -> tuple[FloatArray, FloatArray]:
-        """The thermal (u, v) each depth pixel of a frame maps to, float32 (H, W) each, NaN
+    def thermal_pixel_of_depth(
+        self, depth: NDArray[np.uint16]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The thermal (u, v) each depth pixel of a frame maps to, float64 (H, W) each, NaN
         where none (invalid depth, behind the camera, beyond the lens' valid radius); for the
         accuracy of a method against ground truth."""
         return self.strategy.thermal_pixel_of_depth(self._check_depth(depth))

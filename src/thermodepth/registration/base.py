@@ -97,8 +97,10 @@ class RegistrationMethod(Protocol):
         """The thermal value each depth pixel sees, with the reason where none."""
         ...
 
-    def thermal_pixel_of_depth(self, depth: NDArray[np.uint16]) -> tuple[FloatArray, FloatArray]:
-        """The thermal (u, v) each depth pixel maps to, float32 (H, W) each, NaN where none
+    def thermal_pixel_of_depth(
+        self, depth: NDArray[np.uint16]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The thermal (u, v) each depth pixel maps to, float64 (H, W) each, NaN where none
         (invalid depth, behind the camera or beyond the lens' valid radius)."""
         ...
 

@@ -82,10 +82,15 @@ class PaperMethod:
         z = np.where(units > 0, units * self.scale, np.float32(np.nan)).astype(np.float32)
         return DepthOnThermal(z, z * self.range_per_z)
 
-    def thermal_pixel_of_depth(self, depth: NDArray[np.uint16]) -> tuple[FloatArray, FloatArray]:
+    def thermal_pixel_of_depth(
+        self, depth: NDArray[np.uint16]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The upscale's fixed map (the same at every depth), NaN where the depth is invalid."""
-        nan = np.float32(np.nan)
-        return np.where(depth > 0, self.map_u, nan), np.where(depth > 0, self.map_v, nan)
+        valid = depth > 0
+        return (
+            np.where(valid, self.map_u, np.nan).astype(np.float64),
+            np.where(valid, self.map_v, np.nan).astype(np.float64),
+        )
 
 
 def _fit_affine(cal: Calibration, distance_m: float) -> tuple[float, float, float, float]:

@@ -146,12 +146,14 @@ class ReprojectMethod:
             sample(*args, np.minimum(self._zbuffer(depth)[0], FAR_M), False, how, into)
         return ThermalOnDepth(into.values, into.reason)
 
-    def thermal_pixel_of_depth(self, depth: NDArray[np.uint16]) -> tuple[FloatArray, FloatArray]:
+    def thermal_pixel_of_depth(
+        self, depth: NDArray[np.uint16]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Computed plainly in float64 (what the kernels compute in float32), for evaluation."""
         cal = self.calibration
         u, v = cal.depth.pixel_grid()
         z_m = np.where(depth > 0, depth * cal.depth_scale_m, np.nan)
         points = cal.thermal_from_depth.apply(cal.depth.deproject(np.stack([u, v], -1), z_m))
         with np.errstate(invalid="ignore"):
-            px = cal.thermal.project(points).astype(np.float32)
+            px = cal.thermal.project(points)
         return px[..., 0], px[..., 1]
