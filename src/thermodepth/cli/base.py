@@ -7,6 +7,7 @@ import functools
 import json
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
@@ -155,6 +156,8 @@ ThermalLatencyMs = Annotated[
         "default 0: not calibrated)."
     ),
 ]
+OutDir = Annotated[Path, typer.Option("-o", "--out", help="Directory to write.")]
+Seed = Annotated[int, typer.Option(help="Random seed.")]
 Board = Annotated[
     str, typer.Option(help="checkerboard:COLSxROWS (inner corners) or circles:COLSxROWS.")
 ]

@@ -12,6 +12,8 @@ from .base import (
     AmbientTempC,
     Board,
     HumidityPct,
+    OutDir,
+    Seed,
     app,
     console,
     one_line_errors,
@@ -44,7 +46,7 @@ def simulate_sweep_cmd(
     by_vox: Annotated[
         bool, typer.Option("--by-vox", help="Average per 1 C of VOx (Tables 1-5).")
     ] = False,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    seed: Seed = 0,
 ) -> None:
     """The paper's protocol: plate-centre ROI readings vs distance and VOx temperature."""
     from ..app.simulate import sweep
@@ -67,13 +69,13 @@ def simulate_sweep_cmd(
 @simulate_app.command("frames")
 @one_line_errors
 def simulate_frames_cmd(
-    out: Annotated[Path, typer.Option("-o", "--out", help="Directory to write.")],
+    out: OutDir,
     scene: Annotated[
         str, typer.Option(help="plate or inspection (plate + 70 C chip).")
     ] = "inspection",
     distance_m: Annotated[float, typer.Option(help="Rig distance to the plate, m.")] = 1.0,
     frames: Annotated[int, typer.Option(help="Number of frame pairs.")] = 5,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    seed: Seed = 0,
 ) -> None:
     """Frame pairs with ground truth (npz per frame) and the rig's calibration."""
     from ..app.simulate import frames as write_frames
@@ -85,11 +87,11 @@ def simulate_frames_cmd(
 @simulate_app.command("targets")
 @one_line_errors
 def simulate_targets_cmd(
-    out: Annotated[Path, typer.Option("-o", "--out", help="Directory to write.")],
+    out: OutDir,
     board: Board = "checkerboard:9x6",
     square_m: Annotated[float, typer.Option(help="Square size (circle grid step), m.")] = 0.03,
     poses: Annotated[int, typer.Option(help="Number of board poses.")] = 20,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    seed: Seed = 0,
 ) -> None:
     """Heated-board captures (IR + thermal per pose) for `thermodepth calibrate`."""
     from ..app.simulate import targets
