@@ -11,6 +11,7 @@ BENCHMARKS = [
     "bench_compensation",
     "bench_pipeline",
     "bench_recording",
+    "bench_detection",
 ]
 
 

@@ -24,8 +24,8 @@ from thermodepth.calibrate import (
     discover_pairs,
     flag_outliers,
     grid_continues,
-    load_depth_intrinsics,
     load_image,
+    load_intrinsics,
     match_order,
     plot_report,
     run_calibration,
@@ -226,11 +226,11 @@ def test_circle_grid_calibrates(tmp_path: Path) -> None:
 
 def test_fixed_depth_intrinsics_are_held(sim_dir: Path, tmp_path: Path) -> None:
     truth_path = sim_dir / "truth_calibration.yaml"
-    depth, scale = load_depth_intrinsics(truth_path)  # a whole calibration file: its depth
+    depth, scale = load_intrinsics(truth_path, "depth")  # a whole calibration file: its depth
     assert scale == 0.001 and depth == Calibration.load(truth_path).depth
     flat = tmp_path / "d435.json"
     flat.write_text(json.dumps(yaml.safe_load(truth_path.read_text())["depth"]))
-    depth2, _ = load_depth_intrinsics(flat)  # just the camera's fields
+    depth2, _ = load_intrinsics(flat, "depth")  # just the camera's fields
     assert depth2 == depth
     result = run_calibration(sim_dir, BOARD_SIM, depth_intrinsics=depth)
     assert result.calibration.depth == depth
@@ -245,10 +245,10 @@ def test_bad_depth_intrinsics_files(tmp_path: Path) -> None:
         "distortion: [0, 0, 0, 0, 0]}\n"
     )
     with pytest.raises(InputError, match=r"depth\.yaml: depth\.fx"):
-        load_depth_intrinsics(bad)
+        load_intrinsics(bad, "depth")
     bad.write_text("width: 1280\n")
     with pytest.raises(InputError, match=r"depth\.yaml: height: missing"):
-        load_depth_intrinsics(bad)
+        load_intrinsics(bad, "depth")
     camera = (
         "width: 1280, height: 720, fx: 645, fy: 645, cx: 639.5, cy: 359.5, "
         "distortion: [0, 0, 0, 0, 0]"
@@ -256,7 +256,7 @@ def test_bad_depth_intrinsics_files(tmp_path: Path) -> None:
     for scale, message in ((".inf", "finite number"), ("-1", "greater than 0")):
         bad.write_text(f"depth: {{{camera}, depth_scale_m: {scale}}}\n")
         with pytest.raises(InputError, match=rf"depth\.yaml: depth\.depth_scale_m: .*{message}"):
-            load_depth_intrinsics(bad)
+            load_intrinsics(bad, "depth")
 
 
 @needs_real

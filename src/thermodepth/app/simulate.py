@@ -7,16 +7,22 @@ from pathlib import Path
 
 from ..board import BoardSpec
 from ..errors import FieldError, check_count
+from ..io.recording import check_output
+from ..palettes import PALETTES
 from ..progress import SILENT, Reporter
+from ..sim.lepton import LeptonModel
 from ..sim.protocols import (
     SCENES,
     SweepConfig,
     TargetCaptures,
     aggregate_by_vox,
+    session_frames,
+    simulate_board_session,
     simulate_sweep,
     simulate_targets,
     write_frames,
 )
+from ..sim.scene import BOARD_STYLES
 from ..sweep import SweepTable, write_sweep_csv
 
 
@@ -54,6 +60,38 @@ def frames(
         return write_frames(out, SCENES[scene](), distance_m, count, seed, advance)
 
 
+def board_session(
+    out: Path,
+    board: str = "checkerboard:9x6",
+    square_m: float = 0.03,
+    poses: int = 12,
+    seed: int = 0,
+    style: str = "bare",
+    hold_s: float = 0.7,
+    move_s: float = 0.35,
+    reporter: Reporter = SILENT,
+) -> Path:
+    """A recording of a board shown to the rig, for ``capture-board``
+    (:func:`~thermodepth.sim.protocols.simulate_board_session`)."""
+    spec = BoardSpec.parse(board, square_m)
+    check_count("poses", poses)
+    _check_style(style)
+    for name, value in (("hold_s", hold_s), ("move_s", move_s)):
+        if not value > 0:
+            raise FieldError(name, "must be > 0 seconds")
+    check_output(out)
+    frames = session_frames(poses, hold_s, move_s, LeptonModel().fps)
+    with reporter.task("board session", frames) as advance:
+        return simulate_board_session(
+            out, spec, poses, seed, style, hold_s, move_s, progress=advance
+        )
+
+
+def _check_style(style: str) -> None:
+    if style not in BOARD_STYLES:
+        raise FieldError("style", f"unknown {style!r}; choose from {', '.join(BOARD_STYLES)}")
+
+
 def targets(
     out: Path,
     board: str = "checkerboard:9x6",
@@ -61,9 +99,20 @@ def targets(
     poses: int = 20,
     seed: int = 0,
     reporter: Reporter = SILENT,
+    style: str = "bare",
+    thermal_format: str = "counts",
 ) -> TargetCaptures:
-    """Heated-board captures (IR + thermal per pose) for ``thermodepth calibrate``."""
+    """Heated-board captures (IR + thermal per pose) for ``thermodepth calibrate``: a board
+    of ``style`` (:data:`~thermodepth.sim.scene.BOARD_STYLES`), thermal images saved as raw
+    counts or in a palette (``thermal_format``)."""
     spec = BoardSpec.parse(board, square_m)
     check_count("poses", poses)
+    _check_style(style)
+    if thermal_format != "counts" and thermal_format not in PALETTES:
+        raise FieldError(
+            "thermal_format", f"unknown {thermal_format!r}; choose counts or {', '.join(PALETTES)}"
+        )
     with reporter.task("targets", poses) as advance:
-        return simulate_targets(out, spec, poses, seed, progress=advance)
+        return simulate_targets(
+            out, spec, poses, seed, progress=advance, style=style, thermal_format=thermal_format
+        )

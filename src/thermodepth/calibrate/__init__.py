@@ -16,7 +16,9 @@ camera has 19,200 pixels and the other 921,600. One module per stage:
    :func:`fixed_camera_fit` when the intrinsics are given; :func:`stereo_calibrate`
    (``cv2.stereoCalibrate`` with ``CALIB_FIX_INTRINSIC``); :func:`flag_outliers`.
 5. :mod:`.run`: :func:`run_calibration` ties them together into a
-   :class:`CalibrationResult`; :mod:`.report` writes ``calib_report.json`` and ``.png``.
+   :class:`CalibrationResult`; :mod:`.single`: :func:`run_camera_calibration`, one camera's
+   intrinsics from single views (:class:`CameraResult`); :mod:`.report` writes
+   ``calib_report.json`` and ``.png`` for either.
 
 Units: lengths in metres (square size, translation), pixels for image coordinates (OpenCV
 conventions: pixel centres at integers), angles in degrees in the report.
@@ -44,13 +46,21 @@ from .fit import (
     stereo_calibrate,
 )
 from .images import IMAGE_SUFFIXES, load_image, stretch_to_unit, upscale_factor
-from .report import plot_report, write_report_json
+from .report import plot_camera_report, plot_report, write_report_json
 from .run import (
     MIN_PAIRS,
     CalibrationResult,
     SkippedPair,
-    load_depth_intrinsics,
+    detect_view,
+    load_intrinsics,
     run_calibration,
+)
+from .single import (
+    CameraResult,
+    SkippedImage,
+    as_camera,
+    discover_images,
+    run_camera_calibration,
 )
 
 __all__ = [
@@ -60,26 +70,33 @@ __all__ = [
     "REFINE_METHODS",
     "CalibrationResult",
     "CameraFit",
+    "CameraResult",
     "Detection",
     "ImagePair",
     "PairListing",
+    "SkippedImage",
     "SkippedPair",
     "StereoFit",
+    "as_camera",
     "calibrate_camera",
     "canonical_order",
     "coverage_grid",
     "detect_board",
+    "detect_view",
+    "discover_images",
     "discover_pairs",
     "fixed_camera_fit",
     "flag_outliers",
     "grid_continues",
-    "load_depth_intrinsics",
     "load_image",
+    "load_intrinsics",
     "match_order",
     "outlier_limits_px",
+    "plot_camera_report",
     "plot_report",
     "refine_corners_homography",
     "run_calibration",
+    "run_camera_calibration",
     "stereo_calibrate",
     "stretch_to_unit",
     "upscale_factor",

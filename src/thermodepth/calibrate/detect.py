@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import map_coordinates
 
 from ..board import BoardSpec
-from .images import stretch_to_unit, upscale_factor
+from .images import plain_grey, stretch_to_unit, upscale_factor
 
 FloatArray = NDArray[np.float64]
 
@@ -74,7 +74,7 @@ def detect_board(
         )
     img8 = np.clip(np.rint(fine), 0, 255).astype(np.uint8)
     found = (
-        _find_checkerboard(img8, fine, board, s, stretch)
+        _find_checkerboard(img8, fine, board, s, stretch, plain_grey(image))
         if board.kind == "checkerboard"
         else _find_circles(img8, board)
     )
@@ -97,7 +97,12 @@ def _min_spacing(points: FloatArray, board: BoardSpec) -> float:
 
 
 def _find_checkerboard(
-    img8: NDArray[np.uint8], fine: NDArray[np.float32], board: BoardSpec, s: int, stretched: bool
+    img8: NDArray[np.uint8],
+    fine: NDArray[np.float32],
+    board: BoardSpec,
+    s: int,
+    stretched: bool,
+    plain8: NDArray[np.uint8],
 ) -> tuple[FloatArray, bool, str] | None:
     size = board.pattern_size
     adaptive, normalise = cv2.CALIB_CB_ADAPTIVE_THRESH, cv2.CALIB_CB_NORMALIZE_IMAGE
@@ -125,6 +130,14 @@ def _find_checkerboard(
         if ok:
             up = (c.reshape(-1, 2).astype(np.float64) + 0.5) * s - 0.5
             return _refine(up, fine, board, s), inverted, "findChessboardCornersSB"
+    # last, OpenCV as a user would call it (default flags, the image at its own scale):
+    # a board it finds on its own is never missed
+    for inverted in (False, True):
+        for find in (cv2.findChessboardCorners, cv2.findChessboardCornersSB):
+            ok, c = find(255 - plain8 if inverted else plain8, size)
+            if ok:
+                up = (c.reshape(-1, 2).astype(np.float64) + 0.5) * s - 0.5
+                return _refine(up, fine, board, s), inverted, f"{find.__name__} (plain)"
     return None
 
 
@@ -218,69 +231,82 @@ def refine_corners_homography(
     return pts
 
 
-# Past the last inner corner of a checkerboard lie its outer squares on one side and the
-# margin on the other: half a corner's contrast. A grid of more corners than the detector was
-# told goes on with a full one there (OpenCV finds such sub-grids and would pair different
-# corners in the two cameras).
-CONTINUES_FRACTION = 0.7
-"""Contrast past an edge, as a fraction of the inner corners', above which the pattern is
-taken to go on (theory: 0.5 at a true edge, 1.0 where it goes on; measured: the highest edge
-of a view 0.47-0.57 at the right size, mostly 0.66-1.15 for a sub-grid, on OpenCV's samples
-and simulated IR + Lepton views; docs/calibration.md)."""
+# Past each edge of a checkerboard's grid of inner corners lies a row of its outer squares,
+# alternating with the board's own contrast; one step further lies the margin, which is
+# uniform, however it is made (bare metal, a hot plate, a mask), or, on a board with more
+# corners than the detector was told, more squares, alternating again. OpenCV finds such
+# sub-grids, and not always the same one in the two cameras of a pair, so the pair would
+# match different corners.
+CONTINUES_FRACTION = 0.5
+"""Alternation of the cells beyond an edge, as a fraction of the board's own (its outer
+squares', in the phase a continuing pattern has), above which the pattern is taken to go
+on: 1 where it goes on, 0 for a uniform margin (measured: docs/calibration.md)."""
+
+
+def _cells(
+    grid: FloatArray, outward: FloatArray, offset: float, spread: float = 0.25
+) -> tuple[FloatArray, ...]:
+    """Sample points of the cells along one edge of a grid of corners: the corners along the
+    edge ``grid`` (n, 2), extended by one step at each end (the corner cells), and the cells
+    between consecutive ones, ``offset`` grid steps outward (``outward``: (n, 2), one step
+    out at each corner). Returns per cell a 3 x 3 grid of points (n + 1, 9, 2) and how far
+    the samples reach (n + 1,), pixels."""
+    ext = np.concatenate([2 * grid[:1] - grid[1:2], grid, 2 * grid[-1:] - grid[-2:-1]])
+    out = np.concatenate([outward[:1], outward, outward[-1:]])
+    centre = (ext[:-1] + ext[1:]) / 2 + offset * (out[:-1] + out[1:]) / 2
+    along, across = ext[1:] - ext[:-1], (out[:-1] + out[1:]) / 2
+    fa, fb = (x.ravel() for x in np.meshgrid([-0.25, 0.0, 0.25], [-spread, 0.0, spread]))
+    points = centre[:, None] + fa[:, None] * along[:, None] + fb[:, None] * across[:, None]
+    reach = (0.25 * np.abs(along) + spread * np.abs(across)).max(axis=1)
+    return points, reach
+
+
+def _alternation(values: FloatArray, usable: NDArray[np.bool_]) -> float:
+    """How much a sequence of cells alternates: the mean of (c_k - c_k+1) (-1)^k over the
+    consecutive pairs both usable (NaN when there are none)."""
+    diff = (values[:-1] - values[1:]) * np.where(np.arange(values.size - 1) % 2 == 0, 1.0, -1.0)
+    pair = usable[:-1] & usable[1:]
+    return float(diff[pair].mean()) if pair.any() else float("nan")
 
 
 def grid_continues(image: NDArray[Any], points_px: FloatArray, board: BoardSpec) -> tuple[str, ...]:
     """The edges (``"left"``, ``"right"``, ``"top"``, ``"bottom"`` of the grid as detected)
-    past which a checkerboard's corner pattern goes on: the board has more corners than
-    ``board`` says.
+    past which a checkerboard's pattern goes on: the board has more corners than ``board``
+    says.
 
-    image: (H, W), any dtype (the score is invariant to an affine map of intensity);
-    points_px: (rows * cols, 2) detected corners in grid order. A corner's contrast is the
-    difference of the mean intensities of its two diagonal pairs of quadrants (3 x 3 samples
-    each, 0.15-0.35 of a square from the corner along the local grid axes), signed by the
-    corner's parity. The points one step past each edge (extrapolated along the grid lines)
-    are scored the same, and their median is compared with the inner corners'
-    (:data:`CONTINUES_FRACTION`). Edges with fewer than two such points inside the image are
-    not judged.
+    image: (H, W), any dtype (the score does not change under a monotonic map of intensity
+    that keeps a uniform margin uniform: a palette's levels, a stretch); points_px: (rows *
+    cols, 2) detected corners in grid order. Along each edge, two rows of cells are sampled
+    (3 x 3 points each, a quarter step apart): the board's outer squares (half a step past
+    the last corners) and what lies beyond them (one and a half steps). The outer squares
+    alternate with the board's contrast; beyond them a margin is uniform, while a pattern
+    that goes on alternates again, each cell the opposite of the square before it. An edge
+    whose cells beyond alternate, in that phase, by more than
+    :data:`CONTINUES_FRACTION` of the outer squares' alternation is one the pattern goes on
+    past. Cells beyond the image are left out; an edge without two neighbouring cells inside
+    is not judged.
     """
     img = np.asarray(image, dtype=np.float32)
     h, w = img.shape
-    rows, cols = board.rows, board.cols
-    g = np.asarray(points_px, dtype=np.float64).reshape(rows, cols, 2)
-    # the grid grown by one extrapolated column on each side, and by one row on each side
-    wide = np.concatenate([2 * g[:, :1] - g[:, 1:2], g, 2 * g[:, -1:] - g[:, -2:-1]], axis=1)
-    tall = np.concatenate([2 * g[:1] - g[1:2], g, 2 * g[-1:] - g[-2:-1]], axis=0)
-    steps = np.array([0.15, 0.25, 0.35])
-    fx, fy = (a.ravel() for a in np.meshgrid(steps, steps))
-
-    def contrast(grid: FloatArray, first_col: int, first_row: int) -> tuple[FloatArray, ...]:
-        # signed corner contrast at every point of a grid, and how far its samples reach
-        ex = np.gradient(grid, axis=1)[..., None, :]
-        ey = np.gradient(grid, axis=0)[..., None, :]
-        means = []
-        for sx, sy in ((1, 1), (-1, -1), (1, -1), (-1, 1)):
-            q = grid[..., None, :] + (sx * fx)[:, None] * ex + (sy * fy)[:, None] * ey
-            means.append(map_coordinates(img, [q[..., 1], q[..., 0]], order=1).mean(axis=-1))
-        r, c = np.indices(grid.shape[:2])
-        parity = np.where((r + first_row + c + first_col) % 2 == 0, 1.0, -1.0)
-        reach = 0.35 * (np.abs(ex) + np.abs(ey)).max(axis=(-2, -1))
-        return (means[0] + means[1] - means[2] - means[3]) * parity, reach
-
-    inner = float(np.median(contrast(g, 0, 0)[0]))
-    if not np.isfinite(inner) or inner == 0:
-        return ()
-    wide_c, wide_reach = contrast(wide, -1, 0)
-    tall_c, tall_reach = contrast(tall, 0, -1)
+    g = np.asarray(points_px, dtype=np.float64).reshape(board.rows, board.cols, 2)
+    edges = {
+        "left": (g[:, 0], g[:, 0] - g[:, 1]),
+        "right": (g[:, -1], g[:, -1] - g[:, -2]),
+        "top": (g[0, :], g[0, :] - g[1, :]),
+        "bottom": (g[-1, :], g[-1, :] - g[-2, :]),
+    }
     found = []
-    for name, grid, score, reach, pick in (
-        ("left", wide, wide_c, wide_reach, np.s_[:, 0]),
-        ("right", wide, wide_c, wide_reach, np.s_[:, -1]),
-        ("top", tall, tall_c, tall_reach, np.s_[0, :]),
-        ("bottom", tall, tall_c, tall_reach, np.s_[-1, :]),
-    ):
-        p, m = grid[pick], reach[pick] + 1
-        inside = (p[:, 0] >= m) & (p[:, 0] <= w - 1 - m) & (p[:, 1] >= m) & (p[:, 1] <= h - 1 - m)
-        if inside.sum() >= 2 and np.median(score[pick][inside]) / inner > CONTINUES_FRACTION:
+    for name, (corners, outward) in edges.items():
+        means, usable = [], []
+        for offset, spread in ((0.5, 0.25), (1.25, 0.12)):  # outer squares, then beyond
+            points, reach = _cells(corners, outward, offset, spread)
+            u, v = points[..., 0], points[..., 1]
+            m = reach[:, None] + 1
+            usable.append(np.all((u >= m) & (u <= w - 1 - m) & (v >= m) & (v <= h - 1 - m), axis=1))
+            means.append(map_coordinates(img, [v, u], order=1).mean(axis=1))
+        own = _alternation(means[0], usable[0] & usable[1])
+        beyond = -_alternation(means[1], usable[0] & usable[1])  # a continuing pattern's phase
+        if np.isfinite(own) and own != 0 and beyond / own > CONTINUES_FRACTION:
             found.append(name)
     return tuple(found)
 

@@ -181,25 +181,43 @@ class CalibrationResult:
         }
 
 
-def load_depth_intrinsics(path: str | Path) -> tuple[Intrinsics, float | None]:
-    """Depth camera intrinsics to hold fixed, and its depth unit if the file has one.
+def load_intrinsics(path: str | Path, camera: str) -> tuple[Intrinsics, float | None]:
+    """A camera's intrinsics to hold fixed, and its depth unit if the file has one.
 
-    Accepts a calibration file (its ``depth:`` section is used) or a YAML/JSON file with just
-    the camera's fields (width, height, fx, fy, cx, cy, distortion, optional depth_scale_m).
+    camera: ``"depth"`` or ``"thermal"``. Accepts a calibration file (its section of that
+    camera is used) or a YAML/JSON file with just the camera's fields (width, height, fx,
+    fy, cx, cy, distortion, optional depth_scale_m), as ``calibrate-camera`` writes them.
     """
     data = read_mapping(path)
-    nested = isinstance(data.get("depth"), dict)
-    section = data["depth"] if nested else data
+    nested = isinstance(data.get(camera), dict)
+    section = data[camera] if nested else data
     schema = DepthCameraSchema if "depth_scale_m" in section else CameraSchema
-    cam = validated(schema, section, str(path), "depth." if nested else "")
+    cam = validated(schema, section, str(path), f"{camera}." if nested else "")
     return intrinsics_of(cam), getattr(cam, "depth_scale_m", None)
 
 
-def _image_size(img: NDArray[Any]) -> tuple[int, int]:
+def detect_view(
+    image: NDArray[Any],
+    board: BoardSpec,
+    thermal: bool,
+    refine: str,
+    upscale: int | None = None,
+) -> tuple[Detection | None, tuple[str, ...]]:
+    """The board in one camera's image: its detection (None: not found; a thermal image is
+    stretched, a depth camera's 8-bit image used as it is) and the edges past which its
+    pattern goes on (a board larger than ``board``: :func:`~.detect.grid_continues`)."""
+    det = detect_board(image, board, True if thermal else None, upscale, refine)
+    if det is None or board.kind != "checkerboard":
+        return det, ()
+    return det, grid_continues(image, det.points_px, board)
+
+
+def image_size(img: NDArray[Any]) -> tuple[int, int]:
+    """(width, height) of an image (H, W)."""
     return (int(img.shape[1]), int(img.shape[0]))
 
 
-def _check_sizes(sizes: dict[Path, tuple[int, int]], camera: str) -> tuple[int, int]:
+def check_sizes(sizes: dict[Path, tuple[int, int]], camera: str) -> tuple[int, int]:
     """The one image size of a camera; InputError naming the files that differ."""
     counts = Counter(sizes.values())
     common, n_common = counts.most_common(1)[0]
@@ -220,6 +238,7 @@ def run_calibration(
     depth_intrinsics: Intrinsics | None = None,
     depth_scale_m: float = 0.001,
     thermal_model: str = "no-k3",
+    thermal_intrinsics: Intrinsics | None = None,
     depth_model: str = "radial",
     drop_outliers: bool = False,
     min_pairs: int = MIN_PAIRS,
@@ -234,13 +253,15 @@ def run_calibration(
     board: the target (square size in metres: translation comes out in metres);
     depth_intrinsics: hold the depth camera's intrinsics fixed (else calibrated from its
     images); depth_scale_m: the depth unit written to the calibration file; thermal_model /
-    depth_model: distortion terms to fit (:data:`DISTORTION_MODELS`); drop_outliers: fit
-    again without the outlier images (:func:`flag_outliers`); min_pairs: fewest usable pairs;
-    progress: called with 1 per pair examined.
+    depth_model: distortion terms to fit (:data:`DISTORTION_MODELS`); thermal_intrinsics:
+    hold the thermal camera's intrinsics fixed (from ``calibrate-camera``: many single views
+    fit a 160x120 camera better than the pairs alone); drop_outliers: fit again without the
+    outlier images (:func:`flag_outliers`); min_pairs: fewest usable pairs; progress: called
+    with 1 per pair examined.
 
     Unreadable images and pairs where one camera shows no board are skipped and listed.
     Raises InputError for fewer than ``min_pairs`` usable pairs (saying how many and why),
-    image sizes that change within a camera, or depth intrinsics of another image size.
+    image sizes that change within a camera, or fixed intrinsics of another image size.
     """
     for name, refine in (("thermal", thermal_refine), ("depth", depth_refine)):
         if refine not in REFINE_METHODS:
@@ -261,46 +282,44 @@ def run_calibration(
     thermal_sizes: dict[Path, tuple[int, int]] = {}
     for pair in listing.pairs:
         images = []
-        for path in (pair.depth_path, pair.thermal_path):
+        for path, thermal in ((pair.depth_path, False), (pair.thermal_path, True)):
             try:
-                images.append(load_image(path))
+                images.append(load_image(path, thermal))
             except InputError as exc:
                 skipped.append(SkippedPair(pair, "unreadable", str(exc), (path,)))
                 break
         else:
-            depth_sizes[pair.depth_path] = _image_size(images[0])
-            thermal_sizes[pair.thermal_path] = _image_size(images[1])
+            depth_sizes[pair.depth_path] = image_size(images[0])
+            thermal_sizes[pair.thermal_path] = image_size(images[1])
             loaded.append((pair, images[0], images[1]))
-    depth_size = _check_sizes(depth_sizes, "depth camera") if depth_sizes else (0, 0)
-    thermal_size = _check_sizes(thermal_sizes, "thermal") if thermal_sizes else (0, 0)
-    if (
-        depth_intrinsics is not None
-        and depth_sizes
-        and (depth_intrinsics.width, depth_intrinsics.height) != depth_size
+    depth_size = check_sizes(depth_sizes, "depth camera") if depth_sizes else (0, 0)
+    thermal_size = check_sizes(thermal_sizes, "thermal") if thermal_sizes else (0, 0)
+    for name, fixed, size in (
+        ("depth", depth_intrinsics, depth_size),
+        ("thermal", thermal_intrinsics, thermal_size),
     ):
-        raise FieldError(
-            "depth_intrinsics",
-            f"size {depth_intrinsics.width}x{depth_intrinsics.height} does not match the "
-            f"depth camera's images ({depth_size[0]}x{depth_size[1]})",
-        )
+        if fixed is not None and loaded and (fixed.width, fixed.height) != size:
+            raise FieldError(
+                f"{name}_intrinsics",
+                f"size {fixed.width}x{fixed.height} does not match the {name} camera's "
+                f"images ({size[0]}x{size[1]})",
+            )
     if progress and len(loaded) < len(listing.pairs):
         progress(len(listing.pairs) - len(loaded))
 
     found: list[tuple[ImagePair, Detection, Detection]] = []
     for pair, depth_img, thermal_img in loaded:
-        d = detect_board(depth_img, board, refine=depth_refine)
-        t = detect_board(
-            thermal_img, board, stretch=True, upscale=thermal_upscale, refine=thermal_refine
-        )
+        d, d_edges = detect_view(depth_img, board, False, depth_refine)
+        t, t_edges = detect_view(thermal_img, board, True, thermal_refine, thermal_upscale)
         if d is None or t is None:
             missing = tuple(
                 p for p, det in ((pair.depth_path, d), (pair.thermal_path, t)) if det is None
             )
             names = " and ".join(p.name for p in missing)
             skipped.append(SkippedPair(pair, "no board", f"no {board} found in {names}", missing))
-        elif larger := _larger_boards(
-            board, (pair.depth_path, depth_img, d), (pair.thermal_path, thermal_img, t)
-        ):
+        elif larger := [
+            (p, e) for p, e in ((pair.depth_path, d_edges), (pair.thermal_path, t_edges)) if e
+        ]:
             names = " and ".join(f"{p.name} ({', '.join(edges)})" for p, edges in larger)
             skipped.append(
                 SkippedPair(
@@ -333,7 +352,10 @@ def run_calibration(
             dfit = calibrate_camera(obj, dp, depth_size, depth_model)
         else:
             dfit = fixed_camera_fit(depth_intrinsics, obj, dp)
-        tfit = calibrate_camera(obj, tp, thermal_size, thermal_model)
+        if thermal_intrinsics is None:
+            tfit = calibrate_camera(obj, tp, thermal_size, thermal_model)
+        else:
+            tfit = fixed_camera_fit(thermal_intrinsics, obj, tp)
         sfit = stereo_calibrate(obj, dp, tp, dfit.intrinsics, tfit.intrinsics)
         return dfit, tfit, sfit
 
@@ -370,16 +392,6 @@ def run_calibration(
         skipped=tuple(skipped),
         unmatched=listing.unmatched,
     )
-
-
-def _larger_boards(
-    board: BoardSpec, *views: tuple[Path, NDArray[Any], Detection]
-) -> list[tuple[Path, tuple[str, ...]]]:
-    """The images of a pair whose checkerboard goes on past the corners found, and where."""
-    if board.kind != "checkerboard":
-        return []
-    found = [(path, grid_continues(img, det.points_px, board)) for path, img, det in views]
-    return [(path, edges) for path, edges in found if edges]
 
 
 def _too_few_message(

@@ -158,6 +158,17 @@ ThermalLatencyMs = Annotated[
 ]
 OutDir = Annotated[Path, typer.Option("-o", "--out", help="Directory to write.")]
 Seed = Annotated[int, typer.Option(help="Random seed.")]
+ReportDir = Annotated[
+    Path | None,
+    typer.Option(help="Where to write calib_report.json/.png (default: next to --out)."),
+]
+BoardStyle = Annotated[
+    str,
+    typer.Option(
+        help="How the board is made: bare (pattern painted on metal), plate (tape squares on "
+        "a hot plate, hot margin) or mask (a cold mask over a warm plate)."
+    ),
+]
 Board = Annotated[
     str, typer.Option(help="checkerboard:COLSxROWS (inner corners) or circles:COLSxROWS.")
 ]

@@ -11,6 +11,7 @@ from .base import (
     BARS,
     AmbientTempC,
     Board,
+    BoardStyle,
     HumidityPct,
     OutDir,
     Seed,
@@ -92,12 +93,40 @@ def simulate_targets_cmd(
     square_m: Annotated[float, typer.Option(help="Square size (circle grid step), m.")] = 0.03,
     poses: Annotated[int, typer.Option(help="Number of board poses.")] = 20,
     seed: Seed = 0,
+    style: BoardStyle = "bare",
+    thermal_format: Annotated[
+        str,
+        typer.Option(
+            help="Thermal images as raw counts (16-bit PNG) or in a viewer's palette (8-bit "
+            "RGB): ironbow, inferno, gray, ..."
+        ),
+    ] = "counts",
 ) -> None:
     """Heated-board captures (IR + thermal per pose) for `thermodepth calibrate`."""
     from ..app.simulate import targets
 
-    caps = targets(out, board, square_m, poses, seed, BARS)
+    caps = targets(out, board, square_m, poses, seed, BARS, style, thermal_format)
     console.print(f"wrote {len(caps.pairs)} pairs and {caps.calibration_path.name} to {out}")
+
+
+@simulate_app.command("board-session")
+@one_line_errors
+def simulate_board_session_cmd(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Recording to create (.zarr).")],
+    board: Board = "checkerboard:9x6",
+    square_m: Annotated[float, typer.Option(help="Square size (circle grid step), m.")] = 0.03,
+    poses: Annotated[int, typer.Option(help="Number of board poses.")] = 12,
+    seed: Seed = 0,
+    style: BoardStyle = "bare",
+    hold_s: Annotated[float, typer.Option(help="Each pose held this long, s.")] = 0.7,
+    move_s: Annotated[float, typer.Option(help="Moving to the next pose, s.")] = 0.35,
+) -> None:
+    """A recording of a board shown to the rig (held, moved, held ...), with the IR image,
+    for `thermodepth capture-board`."""
+    from ..app.simulate import board_session
+
+    path = board_session(out, board, square_m, poses, seed, style, hold_s, move_s, BARS)
+    console.print(f"wrote {path}")
 
 
 @app.command("demo")

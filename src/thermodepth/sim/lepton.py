@@ -158,22 +158,34 @@ def surface_properties(scene: Scene, hits: Hits) -> tuple[FloatArray, FloatArray
 
     Rays that hit nothing get the ambient temperature, emissivity 1 and albedo 0.
     """
+    temp = [r.material.temp_k for r in scene.rects] + [scene.ambient_temp_k]
+    emis = [r.material.emissivity for r in scene.rects] + [1.0]
+    albedo = [r.material.ir_albedo for r in scene.rects] + [0.0]
+    return (
+        _per_ray(scene, hits, temp, "temp_k"),
+        _per_ray(scene, hits, emis, "emissivity"),
+        _per_ray(scene, hits, albedo, "ir_albedo"),
+    )
+
+
+def near_ir_albedo(scene: Scene, hits: Hits) -> FloatArray:
+    """The near-IR albedo along each ray (what the depth camera's IR image needs; 0 where
+    nothing is hit): :func:`surface_properties`' third, alone."""
+    return _per_ray(scene, hits, [r.material.ir_albedo for r in scene.rects] + [0.0], "ir_albedo")
+
+
+def _per_ray(scene: Scene, hits: Hits, values: list[float], name: str) -> FloatArray:
+    """One material property per ray: ``values`` per rect (then the value of no hit), the
+    second material's ``name`` where a rect's pattern puts it."""
     n = len(scene.rects)
-    temp = np.array([r.material.temp_k for r in scene.rects] + [scene.ambient_temp_k])
-    emis = np.array([r.material.emissivity for r in scene.rects] + [1.0])
-    albedo = np.array([r.material.ir_albedo for r in scene.rects] + [0.0])
-    idx = np.where(hits.rect >= 0, hits.rect, n)
-    t_out, e_out, a_out = temp[idx], emis[idx], albedo[idx]
+    out = np.asarray(values)[np.where(hits.rect >= 0, hits.rect, n)]
     for i, rect in enumerate(scene.rects):
         if rect.pattern is None or rect.material_b is None:
             continue
-        on = hits.rect == i
-        b = np.zeros_like(on)
-        b[on] = rect.pattern.second_material(hits.s_m[on], hits.q_m[on])
-        t_out[b] = rect.material_b.temp_k
-        e_out[b] = rect.material_b.emissivity
-        a_out[b] = rect.material_b.ir_albedo
-    return t_out, e_out, a_out
+        on = np.flatnonzero(hits.rect.ravel() == i)
+        second = rect.pattern.second_material(hits.s_m.ravel()[on], hits.q_m.ravel()[on])
+        out.ravel()[on[second]] = getattr(rect.material_b, name)
+    return out
 
 
 def footprint_and_blur(

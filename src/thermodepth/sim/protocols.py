@@ -17,11 +17,12 @@ from ..board import BoardSpec
 from ..calibration import Calibration
 from ..camera import RigidTransform
 from ..conditions import Conditions, Radiometry
+from ..palettes import PALETTES, apply_palette
 from ..progress import Progress
 from ..radiometry import ZERO_C_IN_K
 from ..sweep import COLUMNS, SweepTable
 from .lepton import FpaProfile, LeptonModel, LeptonSensor, ramp_fpa, steps_fpa
-from .rig import Rig, default_calibration
+from .rig import Rig, Trajectory, default_calibration
 from .scene import Scene, board_pattern, camera_pose, plate_scene, target_scene
 
 
@@ -251,10 +252,22 @@ def simulate_targets(
     ambient_temp_c: float = 25.0,
     thermal_supersample: int = 8,
     progress: Progress | None = None,
+    style: str = "bare",
+    margin_m: float | None = None,
+    thermal_format: str = "counts",
 ) -> TargetCaptures:
     """Heated-board captures for ``thermodepth calibrate``: ``poseNN_ir.png`` (8-bit IR of
-    the depth camera) and ``poseNN_thermal.png`` (16-bit counts) per pose, plus
-    ``truth_calibration.yaml`` and ``truth_poses.json`` (``depth_from_board``)."""
+    the depth camera) and ``poseNN_thermal.png`` per pose, plus ``truth_calibration.yaml``
+    and ``truth_poses.json`` (``depth_from_board``).
+
+    style: how the board is made (:data:`~thermodepth.sim.scene.BOARD_STYLES`), with a
+    margin ``margin_m`` wide (None: the style's); thermal_format: ``counts`` (16-bit PNG of
+    the raw counts) or a palette of :data:`~thermodepth.palettes.PALETTES` (8-bit RGB, as
+    viewer tools save frames: :func:`~thermodepth.palettes.apply_palette`)."""
+    if thermal_format != "counts" and thermal_format not in PALETTES:
+        raise ValueError(
+            f"unknown thermal format {thermal_format!r}; choose counts or one of {PALETTES}"
+        )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cal = default_calibration()
@@ -266,7 +279,7 @@ def simulate_targets(
     for i, pose in enumerate(poses):
         world_from_board = RigidTransform(pose.rotation, pose.translation_m, "world", "board")
         scene = target_scene(
-            board_pattern(board), board_temp_c, ambient_temp_c, board_pose=world_from_board
+            board_pattern(board), board_temp_c, ambient_temp_c, margin_m, world_from_board, style
         )
         rig = Rig(
             scene,
@@ -281,7 +294,10 @@ def simulate_targets(
         assert frame.ir is not None
         ir_path, th_path = out / f"pose{i:02d}_ir.png", out / f"pose{i:02d}_thermal.png"
         cv2.imwrite(str(ir_path), frame.ir)
-        cv2.imwrite(str(th_path), frame.thermal)
+        if thermal_format == "counts":
+            cv2.imwrite(str(th_path), frame.thermal)
+        else:  # RGB, written as OpenCV's BGR
+            cv2.imwrite(str(th_path), apply_palette(frame.thermal, thermal_format)[..., ::-1])
         pairs.append((ir_path, th_path))
         if progress:
             progress(1)
@@ -297,6 +313,86 @@ def simulate_targets(
         )
     )
     return TargetCaptures(pairs, cal_path, poses)
+
+
+# -- a board moved in front of the rig --------------------------------------------------------
+
+
+def held_and_moved(
+    poses: list[RigidTransform], hold_s: float, move_s: float, start_s: float = 0.0
+) -> Trajectory:
+    """A trajectory through ``poses`` (each ``world_from_depth``): each held for ``hold_s``,
+    then moved to the next over ``move_s`` (rotation about one axis at a constant rate,
+    translation in a straight line), as a person holds a board still, then moves it."""
+    step = hold_s + move_s
+
+    def pose_at(t: float) -> RigidTransform:
+        k, into = divmod(max(t - start_s, 0.0), step)
+        i = min(int(k), len(poses) - 1)
+        if i == len(poses) - 1 or into <= hold_s:
+            return poses[i]
+        a, b = poses[i], poses[i + 1]
+        f = (into - hold_s) / move_s
+        rvec = cv2.Rodrigues(a.rotation.T @ b.rotation)[0].ravel()
+        rot = a.rotation @ cv2.Rodrigues(rvec * f)[0]
+        return RigidTransform(
+            rot, (1 - f) * a.translation_m + f * b.translation_m, "world", "depth"
+        )
+
+    return pose_at
+
+
+def session_frames(n_poses: int, hold_s: float, move_s: float, fps: float) -> int:
+    """Thermal frames (pairs) of a board session: from the first pose's hold to the end of
+    the last one's."""
+    return int(((n_poses - 1) * (hold_s + move_s) + hold_s) * fps) + 1
+
+
+def simulate_board_session(
+    out: str | Path,
+    board: BoardSpec,
+    n_poses: int = 12,
+    seed: int = 0,
+    style: str = "bare",
+    hold_s: float = 0.7,
+    move_s: float = 0.35,
+    ffc_interval_s: float = 180.0,
+    board_temp_c: float = 45.0,
+    progress: Progress | None = None,
+) -> Path:
+    """A recording of someone showing a board to the rig: ``n_poses`` poses spread as
+    :func:`random_board_poses` spreads them, each held ``hold_s`` then moved to the next over
+    ``move_s``, seen by both cameras (with the IR image), each at its own exposure time, so
+    pairs taken while the board moves show it in two places. Only the depth frames that pair
+    with a thermal frame are recorded (the ones ``capture-board`` reads). The recording's
+    calibration is the rig's truth. ``ffc_interval_s``: the Lepton's timed shutter (FFC
+    frames are recorded, marked as such)."""
+    from ..frames import match_of
+    from ..io.recording import RecordingWriter
+
+    cal = default_calibration()
+    rng = np.random.default_rng(seed)
+    held = [p.inverse() for p in random_board_poses(board, n_poses, cal, rng)]  # board frame
+    world = [RigidTransform(p.rotation, p.translation_m, "world", "depth") for p in held]
+    trajectory = held_and_moved(world, hold_s, move_s, start_s=1.0)  # after power-on FFC
+    rig = Rig(
+        target_scene(board_pattern(board), board_temp_c, style=style),
+        world[0],
+        calibration=cal,
+        lepton=LeptonModel(supersample=8, ffc_interval_s=ffc_interval_s),
+        seed=seed,
+        with_ir=True,
+        start_s=1.0,
+        trajectory=trajectory,
+    )
+    n_frames = session_frames(n_poses, hold_s, move_s, rig.lepton.fps)
+    settings = {"source": "sim:board-session", "board": str(board), "style": style}
+    with RecordingWriter(out, cal, settings, source="sim:board-session") as writer:
+        for pair in rig.frames(n_frames):
+            writer.add_match(match_of(pair))
+            if progress:
+                progress(1)
+    return Path(out)
 
 
 # -- frame sets with ground truth ---------------------------------------------------------

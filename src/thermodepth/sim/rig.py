@@ -6,9 +6,10 @@ and gives exact ground truth (:class:`GroundTruth`) for the same geometry.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections import OrderedDict
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from functools import cached_property
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,6 +25,7 @@ from .lepton import (
     aperture_radiance,
     constant_fpa,
     footprint_and_blur,
+    near_ir_albedo,
     radiance_table,
     surface_properties,
 )
@@ -81,13 +83,33 @@ class GroundTruth:
     thermal_rect: NDArray[np.int64]
 
 
+Trajectory = Callable[[float], RigidTransform]
+"""``world_from_depth`` of a moving rig as a function of time in seconds."""
+
+
+@dataclass(frozen=True, eq=False)
+class _DepthViews:
+    """What the depth camera sees from one rig pose, noise-free: its hits, the stereo
+    shadow, and the near-IR albedo per pixel (H, W) when asked for."""
+
+    hits: Hits
+    shadow: NDArray[np.bool_]
+    ir_albedo: FloatArray | None
+
+
+_RENDERS_KEPT = 4  # per camera: a held pose renders once, a moving one each frame
+
+
 @dataclass(eq=False)
 class Rig:
     """A depth camera and a thermal camera looking at ``scene`` from ``pose``.
 
-    pose: ``world_from_depth``; calibration: the rig's true calibration; fpa: FPA temperature
-    profile; seed: all randomness (noise, fixed pattern) follows from it; with_ir: also render
-    the depth camera's infrared image; start_s: time of the first thermal frame.
+    pose: ``world_from_depth``; trajectory: a moving rig's ``world_from_depth`` over time
+    (None: it stays at ``pose``); each camera is rendered at the pose of its own exposure
+    time, as real cameras that do not expose at the same instant see a moving scene;
+    calibration: the rig's true calibration; fpa: FPA temperature profile; seed: all
+    randomness (noise, fixed pattern) follows from it; with_ir: also render the depth
+    camera's infrared image; start_s: time of the first thermal frame.
     Noise-free renders are cached per pose; frames differ by noise and the sensor's state.
     """
 
@@ -101,6 +123,7 @@ class Rig:
     with_ir: bool = False
     start_s: float = 0.0
     depth_phase_s: float = 0.004
+    trajectory: Trajectory | None = None
 
     def __post_init__(self) -> None:
         if (self.pose.to_frame, self.pose.from_frame) != ("world", "depth"):
@@ -108,6 +131,8 @@ class Rig:
         self.rng = np.random.default_rng(self.seed)
         self.sensor = LeptonSensor(self.lepton, self.calibration.thermal.shape, self.fpa, self.rng)
         self._index = 0
+        self._depth_renders: OrderedDict[bytes, _DepthViews] = OrderedDict()
+        self._thermal_renders: OrderedDict[bytes, FloatArray] = OrderedDict()
 
     # -- frames ----------------------------------------------------------------------------
 
@@ -119,49 +144,82 @@ class Rig:
     def thermal_from_world(self) -> RigidTransform:
         return self.calibration.thermal_from_depth @ self.depth_from_world
 
-    @cached_property
-    def _depth_hits(self) -> Hits:
-        return cast(self.scene, self.depth_from_world, self.calibration.depth)
+    def _cached(
+        self, cache: OrderedDict[bytes, Any], pose: RigidTransform, make: Callable[[], Any]
+    ) -> Any:
+        """``make()`` for ``pose``, kept in ``cache`` (the last few poses)."""
+        key = pose.rotation.tobytes() + pose.translation_m.tobytes() + bytes([self.with_ir])
+        if key not in cache:
+            cache[key] = make()
+            while len(cache) > _RENDERS_KEPT:
+                cache.popitem(last=False)
+        cache.move_to_end(key)
+        return cache[key]
 
-    @cached_property
-    def _shadow(self) -> NDArray[np.bool_]:
-        return stereo_shadow(
-            self._depth_hits.z_m, self.calibration.depth.fx, self.depth_model.baseline_m
-        )
+    def _depth_views(self, pose: RigidTransform) -> _DepthViews:
+        """The depth camera's noise-free renders at ``pose`` (``world_from_depth``)."""
 
-    @cached_property
+        def render() -> _DepthViews:
+            cal = self.calibration
+            depth_from_world = pose.inverse()
+            hits = cast(self.scene, depth_from_world, cal.depth)
+            shadow = stereo_shadow(hits.z_m, cal.depth.fx, self.depth_model.baseline_m)
+            albedo = None
+            if self.with_ir:  # near-IR albedo: the mean over each pixel's sub-rays
+                ss = self.depth_model.ir_supersample
+                ir_hits = cast(self.scene, depth_from_world, cal.depth, ss)
+                albedo = footprint_and_blur(near_ir_albedo(self.scene, ir_hits), ss, 0.0)
+            return _DepthViews(hits, shadow, albedo)
+
+        views: _DepthViews = self._cached(self._depth_renders, pose, render)
+        return views
+
+    def _aperture(self, pose: RigidTransform) -> FloatArray:
+        """Noise-free aperture radiance on the thermal grid after footprint and PSF, (h, w),
+        at ``pose``."""
+
+        def render() -> FloatArray:
+            ss = self.lepton.supersample
+            thermal_from_world = self.calibration.thermal_from_depth @ pose.inverse()
+            hits = cast(self.scene, thermal_from_world, self.calibration.thermal, ss)
+            sub = aperture_radiance(self.scene, hits, radiance_table(self.lepton.response))
+            return footprint_and_blur(sub, ss, self.lepton.psf_sigma_px)
+
+        aperture: FloatArray = self._cached(self._thermal_renders, pose, render)
+        return aperture
+
+    def pose_at(self, time_s: float) -> RigidTransform:
+        """``world_from_depth`` at ``time_s``: the trajectory's, else ``pose``."""
+        return self.trajectory(time_s) if self.trajectory is not None else self.pose
+
+    @property
     def aperture(self) -> FloatArray:
-        """Noise-free aperture radiance on the thermal grid after footprint and PSF, (h, w)."""
-        ss = self.lepton.supersample
-        hits = cast(self.scene, self.thermal_from_world, self.calibration.thermal, ss)
-        sub = aperture_radiance(self.scene, hits, radiance_table(self.lepton.response))
-        return footprint_and_blur(sub, ss, self.lepton.psf_sigma_px)
-
-    @cached_property
-    def _ir_albedo(self) -> FloatArray:
-        """Near-IR albedo per depth pixel (H, W): the mean over its sub-rays (per pose)."""
-        ss = self.depth_model.ir_supersample
-        hits = cast(self.scene, self.depth_from_world, self.calibration.depth, ss)
-        return footprint_and_blur(surface_properties(self.scene, hits)[2], ss, 0.0)
+        """Noise-free aperture radiance on the thermal grid after footprint and PSF, (h, w),
+        at ``pose``."""
+        return self._aperture(self.pose)
 
     def frame(self) -> FramePair:
         """The next frame pair: thermal frame k at start_s + k / fps, paired with the nearest
-        depth frame (30 fps, offset by depth_phase_s)."""
+        depth frame (30 fps, offset by depth_phase_s); each rendered at its own time's
+        pose."""
         k = self._index
         t_thermal = self.start_s + k / self.lepton.fps
         j = round((t_thermal - self.depth_phase_s) * self.depth_model.fps)
         t_depth = j / self.depth_model.fps + self.depth_phase_s
         cal = self.calibration
+        seen = self._depth_views(self.pose_at(t_depth))
         depth = depth_units(
-            self._depth_hits.z_m,
+            seen.hits.z_m,
             cal.depth.fx,
             cal.depth_scale_m,
             self.depth_model,
             self.rng,
-            self._shadow,
+            seen.shadow,
         )
-        counts, telemetry = self.sensor.read(t_thermal, self.aperture)
-        ir = ir_image(self._ir_albedo, self.depth_model, self.rng) if self.with_ir else None
+        counts, telemetry = self.sensor.read(t_thermal, self._aperture(self.pose_at(t_thermal)))
+        ir = None
+        if seen.ir_albedo is not None:
+            ir = ir_image(seen.ir_albedo, self.depth_model, self.rng)
         self._index += 1
         return FramePair(
             depth, np.asarray(counts, dtype=np.uint16), t_depth, t_thermal, telemetry, k, ir
@@ -179,7 +237,7 @@ class Rig:
     def truth(self) -> GroundTruth:
         """Exact, noise-free geometry and temperatures for the current pose."""
         cal = self.calibration
-        dh = self._depth_hits
+        dh = self._depth_views(self.pose).hits
         hit = dh.rect >= 0
         u, v = cal.depth.pixel_grid()
         pts_d = cal.depth.deproject(np.stack([u, v], axis=-1), np.where(hit, dh.z_m, np.nan))

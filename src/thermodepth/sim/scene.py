@@ -303,41 +303,64 @@ def occlusion_scene(
     return Scene(tuple(rects), ambient_temp_c + k, 0.5)
 
 
+BOARD_STYLES: dict[str, str] = {
+    "bare": "bare aluminium (emissivity 0.10, bright in near-IR) with the pattern painted on "
+    "(0.95, dark); a margin of bare metal around it",
+    "plate": "a heated plate painted matt (0.95, dark in near-IR) with the pattern in aluminium "
+    "tape (0.10, bright): hot squares inside a uniform hot margin of the plate",
+    "mask": "a cut-out mask at room temperature (card: 0.90, bright in near-IR) in front of a "
+    "warm plate (0.95, dark) that shows through the holes; a margin of the mask",
+}
+"""How calibration boards are made (``target_scene``'s ``style``), as both cameras see them."""
+
+
 def target_scene(
     pattern: Pattern,
     board_temp_c: float = 45.0,
     ambient_temp_c: float = 25.0,
-    margin_m: float = 0.04,
+    margin_m: float | None = None,
     board_pose: RigidTransform | None = None,
+    style: str = "bare",
 ) -> Scene:
-    """A heated calibration board: a pattern painted (eps 0.95, dark in near-IR) on bare
-    aluminium (eps 0.10, bright in near-IR), seen against a far ambient wall.
+    """A heated calibration board of ``style`` (:data:`BOARD_STYLES`) seen against a far
+    ambient wall.
 
-    The painted parts glow in LWIR while the metal mostly reflects the cooler room, so the
-    thermal image has the opposite polarity to the IR image. ``board_pose`` maps the board's
+    The pattern switches between two materials; the board's base material surrounds it as a
+    uniform margin ``margin_m`` wide (default: 4 cm for ``bare``, 1.5 grid steps for the
+    others). In LWIR a high-emissivity surface glows at its temperature and a low-emissivity
+    one mostly reflects the cooler room, so the thermal image's polarity is set by the
+    emissivities, the IR image's by the near-IR albedos. ``board_pose`` maps the board's
     (s, q, normal) frame to the world (default: at the origin, facing -z).
     """
     k = ZERO_C_IN_K
-    paint = Material(board_temp_c + k, 0.95, 0.08, "paint")
-    metal = Material(board_temp_c + k, 0.10, 0.85, "metal")
+    hot, room = board_temp_c + k, ambient_temp_c + k
+    materials = {
+        "bare": (Material(hot, 0.10, 0.85, "metal"), Material(hot, 0.95, 0.08, "paint")),
+        "plate": (Material(hot, 0.95, 0.08, "paint"), Material(hot, 0.10, 0.85, "tape")),
+        "mask": (Material(room, 0.90, 0.80, "card"), Material(hot, 0.95, 0.10, "plate")),
+    }
+    if style not in materials:
+        raise ValueError(f"unknown board style {style!r}; choose from {sorted(materials)}")
+    base, painted = materials[style]
+    if margin_m is None:
+        margin_m = 0.04 if style == "bare" else 1.5 * pattern.board.spacing_m
     w, h = pattern.size_m
     pose = board_pose or RigidTransform.identity("world", "board")
     rot, c = pose.rotation, pose.translation_m
-    # bare metal with the pattern painted on: a bright quiet zone around it in near-IR
     board = Rect(
         c,
         rot[:, 0],
         rot[:, 1],
         w / 2 + margin_m,
         h / 2 + margin_m,
-        metal,
+        base,
         pattern,
-        paint,
+        painted,
         name="board",
     )
-    wall = Material(ambient_temp_c + k, 0.9, 0.5, "wall")
+    wall = Material(room, 0.9, 0.5, "wall")
     far = Rect(c + rot[:, 2] * 2.5, rot[:, 0], rot[:, 1], 12.0, 9.0, wall, name="wall")
-    return Scene((board, far), ambient_temp_c + k, 0.5)
+    return Scene((board, far), room, 0.5)
 
 
 def camera_pose(
