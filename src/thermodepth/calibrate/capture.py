@@ -112,7 +112,7 @@ class BoardCapture:
         if thermal is None:  # cheap first: most frames of a session show no board
             self._previous = None
             return Verdict(False, "no board in the thermal image")
-        depth, depth_edges = detect_view(ir, self.board, False, "cornersubpix")
+        depth, depth_edges = detect_view(ir, self.board, False, "cornersubpix", quick=True)
         if depth is None:
             self._previous = None
             return Verdict(False, "no board in the IR image")

@@ -40,6 +40,7 @@ def detect_board(
     stretch: bool | None = None,
     upscale: int | None = None,
     refine: str = "cornersubpix",
+    quick: bool = False,
 ) -> Detection | None:
     """Find ``board`` in one image; None when it is not found.
 
@@ -51,7 +52,11 @@ def detect_board(
 
     Checkerboards: ``cv2.findChessboardCorners`` (adaptive threshold; histogram
     equalisation only for unstretched images) on the 8-bit image and its negative, then
-    ``cv2.findChessboardCornersSB`` at native scale as a fallback. Corners are refined with
+    ``cv2.findChessboardCornersSB`` at native scale, and last OpenCV's own call on the image
+    as a user hands it (8-bit grey: :func:`~.images.plain_grey`): a board plain OpenCV finds
+    is never missed. ``quick`` (for streams): no histogram equalisation, no exhaustive
+    search, no last call (a 1280x720 image without the board: ~0.5 s instead of ~8 s).
+    Corners are refined with
     ``cv2.cornerSubPix`` on the unclipped float image (its solution does not change under an
     affine map of intensity) with a half window of 0.6 x the smallest corner spacing, at most
     11 px at native scale (OpenCV's sample), stopping after 30 iterations or a 0.01 px step;
@@ -74,7 +79,7 @@ def detect_board(
         )
     img8 = np.clip(np.rint(fine), 0, 255).astype(np.uint8)
     found = (
-        _find_checkerboard(img8, fine, board, s, stretch, plain_grey(image))
+        _find_checkerboard(img8, fine, board, s, stretch, plain_grey(image), quick)
         if board.kind == "checkerboard"
         else _find_circles(img8, board)
     )
@@ -103,20 +108,27 @@ def _find_checkerboard(
     s: int,
     stretched: bool,
     plain8: NDArray[np.uint8],
+    quick: bool,
 ) -> tuple[FloatArray, bool, str] | None:
     size = board.pattern_size
     adaptive, normalise = cv2.CALIB_CB_ADAPTIVE_THRESH, cv2.CALIB_CB_NORMALIZE_IMAGE
     fast = cv2.CALIB_CB_FAST_CHECK  # rejects images without a board quickly; same corners
+    default = adaptive | normalise  # OpenCV's own flags
+    # the image as a user hands it to OpenCV: then OpenCV's own call (default flags, no fast
+    # check) is one of ours, and a board it finds is never missed
+    as_is = not stretched and s == 1
     # A stretched image is normalised already: equalising its histogram again blows up the
     # noise of a uniform background (a thermal scene is mostly wall) and breaks the quads
-    # (measured on simulated Lepton views: 20 of 20 found without it, 16 with it).
-    tries = [adaptive, adaptive | normalise]
-    if not stretched:  # OpenCV's default flags first: what its calibration sample uses
+    # (measured on simulated Lepton views: 20 of 20 found without it, 16 with it). Quick:
+    # no equalising (on a 1280x720 image without the board it takes ~3.5 s, measured).
+    tries = [adaptive] if quick else [adaptive, default]
+    if not stretched and not quick:  # OpenCV's default flags first, as its samples use
         tries.reverse()
     for flags in tries:
+        check = 0 if (as_is and flags == default) else fast
         for inverted in (False, True):
             ok, c = cv2.findChessboardCorners(
-                255 - img8 if inverted else img8, size, flags=flags | fast
+                255 - img8 if inverted else img8, size, flags=flags | check
             )
             if ok:
                 return _refine(c, fine, board, s), inverted, "findChessboardCorners"
@@ -124,14 +136,16 @@ def _find_checkerboard(
     native = (
         img8 if s == 1 else cv2.resize(img8, None, fx=1 / s, fy=1 / s, interpolation=cv2.INTER_AREA)
     )
-    sb = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+    sb = 0 if quick else normalise | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
     for inverted in (False, True):
         ok, c = cv2.findChessboardCornersSB(255 - native if inverted else native, size, flags=sb)
         if ok:
             up = (c.reshape(-1, 2).astype(np.float64) + 0.5) * s - 0.5
             return _refine(up, fine, board, s), inverted, "findChessboardCornersSB"
-    # last, OpenCV as a user would call it (default flags, the image at its own scale):
-    # a board it finds on its own is never missed
+    if quick or as_is:
+        return None
+    # last, OpenCV as a user would call it on the image before our stretch and upscale
+    # (default flags, both detectors): a board it finds on its own is never missed
     for inverted in (False, True):
         for find in (cv2.findChessboardCorners, cv2.findChessboardCornersSB):
             ok, c = find(255 - plain8 if inverted else plain8, size)

@@ -202,11 +202,13 @@ def detect_view(
     thermal: bool,
     refine: str,
     upscale: int | None = None,
+    quick: bool = False,
 ) -> tuple[Detection | None, tuple[str, ...]]:
     """The board in one camera's image: its detection (None: not found; a thermal image is
-    stretched, a depth camera's 8-bit image used as it is) and the edges past which its
-    pattern goes on (a board larger than ``board``: :func:`~.detect.grid_continues`)."""
-    det = detect_board(image, board, True if thermal else None, upscale, refine)
+    stretched, a depth camera's 8-bit image used as it is; ``quick``: the stream's search,
+    :func:`~.detect.detect_board`) and the edges past which its pattern goes on (a board
+    larger than ``board``: :func:`~.detect.grid_continues`)."""
+    det = detect_board(image, board, True if thermal else None, upscale, refine, quick)
     if det is None or board.kind != "checkerboard":
         return det, ()
     return det, grid_continues(image, det.points_px, board)

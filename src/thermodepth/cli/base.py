@@ -126,6 +126,7 @@ class RichReporter:
             MofNCompleteColumn(),
             TimeElapsedColumn(),
             console=err_console,
+            transient=True,  # gone when the work ends: the command's own lines follow
         ) as bar:
             task = bar.add_task(description, total=total)
 
