@@ -22,7 +22,7 @@ DISTORTION_MODELS: dict[str, int] = {
     # k1, k2, p1, p2: the thermal camera's default. A 160x120 view rarely has board corners
     # past r = 0.5 (normalised), where k3 r^6 is a few % of k1 r^2: k3 is then fitted to noise
     # and bends the image corners (simulated rig, 25 poses, 10 seeds: registration off by up
-    # to 0.50 px with k3, 0.22 px without). Tangential terms of a few 1e-4 are small in
+    # to 0.34 px with k3, 0.29 px without). Tangential terms of a few 1e-4 are small in
     # pixels, but leaving them out moves the principal point by ~0.2 px even with perfect
     # corners, a ~0.09 deg rotation error (docs/calibration.md).
     "no-k3": cv2.CALIB_FIX_K3,
