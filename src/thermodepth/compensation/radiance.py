@@ -174,7 +174,15 @@ class RadianceModel:
             else f"degrees {cv.get('degrees')}: the simplest, as nothing can be held out "
             "(one distance and one target)",
             f"fitted over {d0:g}-{d1:g} m and VOx {v0:g}-{v1:g} C; readings beyond are flagged",
-        ]
+        ] + (
+            [
+                f"one target temperature ({self.temp_range_c[0]:g} C): the VOx effect is "
+                "fitted as the sensor's gain with its offset held at 0; a second target "
+                "temperature (20 C or more apart) would fit the offset too and tell them apart"
+            ]
+            if cv.get("offset_held_at_zero")
+            else []
+        )
 
     # -- fitting ----------------------------------------------------------------------------
 
@@ -198,16 +206,16 @@ class RadianceModel:
         conditions = conditions or Conditions()
         check_sweep(table)
         data = _Design.build(table, conditions, planck)
-        refs = np.unique(table["reference_temp_c"])
-        if refs.size == 1:
-            # one target temperature: gain and offset cannot be told apart, fit offset only
-            candidates = [(0, k) for k in range(max_degree + 1)]
-            fixed_gain = True
-        else:
-            candidates = [(g, h) for g in range(max_degree + 1) for h in range(max_degree + 1)]
-            fixed_gain = False
-        chosen, scores = choose_degrees(data, candidates, fixed_gain)
-        gain, offset = data.solve(*chosen, fixed_gain)
+        # one target temperature cannot tell a gain from an offset: the VOx effect is then
+        # fitted as a gain with the offset held at 0 (docs/compensation.md says why)
+        offset_held = np.unique(table["reference_temp_c"]).size == 1
+        candidates = [
+            (g, h)
+            for g in range(max_degree + 1)
+            for h in ([0] if offset_held else range(max_degree + 1))
+        ]
+        chosen, scores = choose_degrees(data, candidates, offset_held)
+        gain, offset = data.solve(*chosen, offset_held)
         x, ref = table["vox_temp_c"], table["reference_temp_c"]
         return cls(
             planck,
@@ -221,7 +229,7 @@ class RadianceModel:
             (float(ref.min()), float(ref.max())),
             {
                 "degrees": {"gain": chosen[0], "offset": chosen[1]},
-                "gain_fixed_to_one": fixed_gain,
+                "offset_held_at_zero": offset_held,
                 "folds": list(data.folds()),
                 # None: not scored (nothing to hold out); the file stays strict JSON
                 "rmse_c": {
@@ -294,22 +302,20 @@ class _Design:
         return cls(w_meas, w_ap, weight, centre, scale, table, cond, planck)
 
     def solve(
-        self, g_deg: int, h_deg: int, fixed_gain: bool, rows: NDArray[np.bool_] | None = None
+        self, g_deg: int, h_deg: int, offset_held: bool, rows: NDArray[np.bool_] | None = None
     ) -> tuple[FloatArray, FloatArray]:
+        """Gain and offset coefficients by weighted least squares over ``rows`` (all by
+        default); with ``offset_held`` the offset is 0 and only the gain is fitted."""
         sel = slice(None) if rows is None else rows
         vox = self.table["vox_temp_c"][sel]
-        t_g = _vox_basis(vox, self.centre, self.scale, g_deg)
-        t_h = _vox_basis(vox, self.centre, self.scale, h_deg)
-        target = self.w_meas[sel]
-        if fixed_gain:
-            target = target - self.w_ap[sel]
-            design = t_h
-        else:
-            design = np.concatenate([t_g * self.w_ap[sel, None], t_h], axis=1)
+        design = _vox_basis(vox, self.centre, self.scale, g_deg) * self.w_ap[sel, None]
+        if not offset_held:
+            design = np.concatenate([design, _vox_basis(vox, self.centre, self.scale, h_deg)], 1)
         sw = np.sqrt(self.weight[sel])
-        coef = np.linalg.lstsq(design * sw[:, None], target * sw, rcond=None)[0].astype(np.float64)
-        if fixed_gain:
-            return np.array([1.0] + [0.0] * g_deg), coef
+        coef = np.linalg.lstsq(design * sw[:, None], self.w_meas[sel] * sw, rcond=None)[0]
+        coef = coef.astype(np.float64)
+        if offset_held:
+            return coef, np.zeros(1)
         return coef[: g_deg + 1], coef[g_deg + 1 :]
 
     def folds(self) -> dict[str, NDArray[np.bool_]]:
@@ -322,14 +328,14 @@ class _Design:
             out |= {f"target {r:g} C": reference == r for r in refs}
         return out
 
-    def held_out_errors(self, g_deg: int, h_deg: int, fixed_gain: bool) -> FloatArray:
+    def held_out_errors(self, g_deg: int, h_deg: int, offset_held: bool) -> FloatArray:
         """Compensated minus true temperature of every row when its fold was held out."""
         errs = []
         for test in self.folds().values():
             train = ~test
             if not train.any():
                 continue
-            gain, offset = self.solve(g_deg, h_deg, fixed_gain, train)
+            gain, offset = self.solve(g_deg, h_deg, offset_held, train)
             model = RadianceModel(
                 self.planck,
                 tuple(gain),
@@ -348,13 +354,13 @@ class _Design:
 
 
 def choose_degrees(
-    data: _Design, candidates: list[tuple[int, int]], fixed_gain: bool
+    data: _Design, candidates: list[tuple[int, int]], offset_held: bool
 ) -> tuple[tuple[int, int], dict[tuple[int, int], float]]:
     """Cross-validated RMSE (C) of each (gain degree, offset degree); the simplest candidate
     within 5 % of the best RMSE wins (fewer parameters generalise more safely)."""
     scores = {}
     for g, h in candidates:
-        err = data.held_out_errors(g, h, fixed_gain)
+        err = data.held_out_errors(g, h, offset_held)
         scores[(g, h)] = float(np.sqrt(np.nanmean(err**2))) if err.size else float("nan")
     finite = {k: v for k, v in scores.items() if np.isfinite(v)}
     if not finite:  # a single fold: nothing to hold out, take the simplest
