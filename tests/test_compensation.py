@@ -173,9 +173,7 @@ ONE_TARGET_CAMERAS = {
     "gain-like VOx effect": LeptonModel(),
     # a camera whose VOx effect is mostly an offset (gain flat to first order, interior
     # emission five times the default): a witness against tuning to our own simulator
-    "offset-like VOx effect": LeptonModel(
-        vox_gain_slope_per_k=2 / 308.15, interior_emission=0.05
-    ),
+    "offset-like VOx effect": LeptonModel(vox_gain_slope_per_k=2 / 308.15, interior_emission=0.05),
 }
 
 

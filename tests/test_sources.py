@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from test_telemetry import telemetry_bytes, words_of
-from thermodepth.errors import InputError
+from thermodepth.errors import InputError, ThermodepthError
 from thermodepth.frames import DepthFrame, FfcState, Telemetry, ThermalFrame
 from thermodepth.io.recording import Recording
 from thermodepth.session import record_session
@@ -290,8 +290,12 @@ def test_realsense_plus_lepton_names_every_missing_device(tmp_path: Path) -> Non
     found = list_devices()
     if found["realsense"] or Path("/dev/video57").exists():
         pytest.skip("a RealSense device or /dev/video57 is attached")
-    if found["realsense_unavailable"]:
-        pytest.skip("pyrealsense2 is unavailable")
+    if found["realsense_unavailable"]:  # no libusb: one line naming the library instead
+        with pytest.raises(ThermodepthError) as lost:
+            open_source("realsense+lepton:57")
+        assert "\n" not in str(lost.value)
+        assert "the system library libusb-1.0-0" in str(lost.value)
+        return
     with pytest.raises(InputError) as info:
         open_source("realsense+lepton:57")
     assert str(info.value) == (

@@ -137,3 +137,24 @@ def plot_overlay(
     ax.set_title(title or f"frame {frame.index}: VOx {frame.vox_temp_c:.2f} C", fontsize=10)
     ax.set_axis_off()
     return save_figure(fig, path)
+
+
+def plot_target(
+    temp_c: np.ndarray, target: np.ndarray | None, title: str, path: str | Path
+) -> Path:
+    """A thermal frame's apparent temperature (C, colour map from its coldest to hottest) with the
+    sweep target's outline in cyan (``target``: (h, w) mask, None: not found), so that a user
+    can confirm what ``collect-sweep`` reads."""
+    plt = pyplot()
+    h, w = temp_c.shape
+    fig, ax = plt.subplots(figsize=(w / 40 + 1.4, h / 40 + 0.6), dpi=100)
+    finite = np.isfinite(temp_c)
+    lo, hi = (np.nanmin(temp_c), np.nanmax(temp_c)) if finite.any() else (0.0, 1.0)
+    im = ax.imshow(np.ma.masked_invalid(temp_c), cmap="inferno", vmin=lo, vmax=max(hi, lo + 0.1))
+    if target is not None and target.any():
+        ax.contour(target.astype(float), levels=[0.5], colors="cyan", linewidths=1.5)
+    fig.colorbar(im, ax=ax, fraction=0.04, pad=0.02, label="apparent temperature (C)")
+    ax.set_title(title, fontsize=8, wrap=True)
+    ax.set_xlabel("u (thermal px)")
+    ax.set_ylabel("v (thermal px)")
+    return save_figure(fig, path)

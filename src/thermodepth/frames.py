@@ -13,6 +13,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import NDArray
 
+from .errors import InputError
 from .radiometry import ZERO_C_IN_K
 
 
@@ -77,6 +78,16 @@ class FramePair:
     def skew_s(self) -> float:
         """depth_time_s - thermal_time_s."""
         return self.depth_time_s - self.thermal_time_s
+
+
+def require_raw_counts(pair: FramePair) -> None:
+    """Refuse a pair whose thermal pixels are a Lepton 3.5's TLinear kelvin, not the raw
+    counts radiometry needs (a recording made with TLinear on): one InputError naming it."""
+    if pair.telemetry.tlinear:
+        raise InputError(
+            f"frame {pair.index}: the thermal pixels are TLinear kelvin, not the raw counts "
+            "the radiometry needs (record with TLinear off)"
+        )
 
 
 @dataclass(frozen=True, eq=False)

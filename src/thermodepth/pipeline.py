@@ -33,7 +33,7 @@ from .calibration import Calibration
 from .compensation import CompensationModel, Flag, NoCompensation, load_model
 from .conditions import ConditionsSchema
 from .errors import FieldError, InputError, repeated
-from .frames import FramePair
+from .frames import FramePair, require_raw_counts
 from .measure import (
     AlarmRule,
     AlarmTracker,
@@ -364,12 +364,7 @@ class Pipeline:
                     f"frame {pair.index}: the {name} image is {img.shape[1]}x{img.shape[0]} "
                     f"but the calibration's {name} camera is {intr.width}x{intr.height}"
                 )
-        if pair.telemetry.tlinear:
-            # a recording of a Lepton 3.5 in TLinear mode: its pixels are kelvin, not counts
-            raise InputError(
-                f"frame {pair.index}: the thermal pixels are TLinear kelvin, not the raw counts "
-                "the radiometry needs (record with TLinear off)"
-            )
+        require_raw_counts(pair)
 
     def temperatures(
         self, counts: NDArray[np.generic], vox_c: float, distance_m: FloatArray

@@ -31,24 +31,29 @@ from .sources.pairing import PairingStats
 
 
 @dataclass(kw_only=True)
-class RecordResult(SessionResult):
-    """How a recording went (:class:`SessionResult`), where it is, and how many units
+class StreamResult(SessionResult):
+    """How a session over a source's events went (:class:`SessionResult`) and how many units
     (pairs; a single camera's frames) were counted."""
+
+    counted: int = 0
+
+
+@dataclass(kw_only=True)
+class RecordResult(StreamResult):
+    """How a recording went (:class:`StreamResult`) and where it is."""
 
     path: Path
     recorder: RecorderStats = field(default_factory=RecorderStats)
-    counted: int = 0
 
 
 @dataclass(kw_only=True)
 class RunResult(SessionResult):
     """How a measuring run went (:class:`SessionResult`): frames fused, frames skipped (shutter
-    closed), alarm events, and each sink's closing line for the user."""
+    closed) and alarm events."""
 
     frames: int = 0
     shutter_frames: int = 0
     events: list[dict[str, Any]] = field(default_factory=list)
-    outputs: list[str] = field(default_factory=list)
 
 
 @contextmanager
@@ -99,6 +104,51 @@ def _unit_of(source: Source) -> type:
     return Match
 
 
+def stream_session(
+    source: Source,
+    sinks: Sequence[Sink],
+    result: StreamResult,
+    *,
+    duration_s: float | None = None,
+    frames: int | None = None,
+    calibration: Calibration | None = None,
+    reporter: Reporter = SILENT,
+    description: str = "",
+) -> None:
+    """Hand every event of ``source`` to ``sinks`` until ``frames`` units (pairs; for a
+    single-camera source, its frames) are counted, ``duration_s`` of source time has passed,
+    the source ends, Ctrl-C, or a device is lost; ``result`` says how it went. The source and
+    the sinks (opened first with a :class:`RunContext` of ``calibration``) are closed in every
+    case. ``reporter`` is told of each unit under ``description``."""
+    check_count("frames", frames)
+    unit = _unit_of(source)
+    context = RunContext(source, calibration)
+    skews: list[float] = []
+    t0: float | None = None
+    with (
+        reporter.task(description or source.name, frames) as advance,
+        _session(source, result, sinks, context),
+    ):
+        for event in source.events():
+            t = event_time_s(event)
+            t0 = t if t0 is None else t0
+            if duration_s is not None and t - t0 >= duration_s:
+                result.stopped = "duration"
+                break
+            for sink in sinks:
+                sink.event(event)
+            if isinstance(event, Match):
+                skews.append(event.pair.skew_s)
+            if isinstance(event, unit):
+                result.counted += 1
+                advance(1)
+                if frames is not None and result.counted >= frames:
+                    result.stopped = "frames"
+                    break
+    result.outputs = [line for sink in sinks if (line := sink.summary()) is not None]
+    _pairs_seen(result, source, skews)
+
+
 def record_session(
     source: Source,
     out: str | Path,
@@ -109,39 +159,23 @@ def record_session(
     overwrite: bool = False,
     reporter: Reporter = SILENT,
 ) -> RecordResult:
-    """Record ``source`` into a new recording at ``out`` until ``frames`` units (pairs; for a
-    single-camera source, its frames) are recorded, ``duration_s`` of source time has passed,
-    the source ends, Ctrl-C, or a device is lost. The source and the recording are closed in
-    every case (the recording keeps every frame written). ``reporter`` is told of each unit.
-    """
-    check_count("frames", frames)
-    unit = _unit_of(source)
+    """Record ``source`` into a new recording at ``out`` (:func:`stream_session` with the
+    recorder as its one sink: the recording keeps every frame written, whatever ends it)."""
     result = RecordResult(path=Path(out), pairing=source.pairing)
     recorder = RecorderSink(out, overwrite=overwrite)
-    context = RunContext(source, calibration)
-    skews: list[float] = []
-    t0: float | None = None
-    with (
-        reporter.task(f"recording {source.name}", frames) as advance,
-        _session(source, result, [recorder], context),
-    ):
+    try:
+        stream_session(
+            source,
+            [recorder],
+            result,
+            duration_s=duration_s,
+            frames=frames,
+            calibration=calibration,
+            reporter=reporter,
+            description=f"recording {source.name}",
+        )
+    finally:
         result.recorder = recorder.stats
-        for event in source.events():
-            t = event_time_s(event)
-            t0 = t if t0 is None else t0
-            if duration_s is not None and t - t0 >= duration_s:
-                result.stopped = "duration"
-                break
-            recorder.event(event)
-            if isinstance(event, Match):
-                skews.append(event.pair.skew_s)
-            if isinstance(event, unit):
-                result.counted += 1
-                advance(1)
-                if frames is not None and result.counted >= frames:
-                    result.stopped = "frames"
-                    break
-    _pairs_seen(result, source, skews)
     return result
 
 

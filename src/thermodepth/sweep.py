@@ -28,17 +28,22 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InputError, read_text, repeated
+from .errors import FieldError, InputError, read_text, repeated
 from .radiometry import MAX_DISTANCE_M, TEMP_LIMITS_C
 
 FloatArray = NDArray[np.float64]
+
+SAME_PLACE = 0.02
+"""Distances of one placement of the target differ by less than this fraction."""
 
 REQUIRED = ("distance_m", "vox_temp_c", "measured_temp_c", "reference_temp_c")
 OPTIONAL = ("ambient_temp_c", "humidity_pct", "emissivity", "raw_counts", "n")
@@ -80,6 +85,21 @@ class SweepTable:
     def get(self, name: str, default: float) -> FloatArray:
         """A column, or ``default`` for every row when the file lacks it."""
         return self.columns.get(name, np.full(len(self), float(default)))
+
+    def distance_groups(self) -> tuple[NDArray[np.intp], FloatArray]:
+        """Rows taken at one placement of the target: each row's group and each group's
+        median distance (m), groups in order of distance. Sorted, a distance more than
+        :data:`SAME_PLACE` beyond the previous starts a new group, so the millimetres a
+        measured distance wanders by stay in one (a simulated sweep's exact distances give one
+        group each)."""
+        d = self["distance_m"]
+        order = np.argsort(d, kind="stable")
+        ds = d[order]
+        starts = np.concatenate([[True], ds[1:] > ds[:-1] * (1 + SAME_PLACE)])
+        labels = np.empty(len(d), np.intp)
+        labels[order] = np.cumsum(starts) - 1
+        centres = np.array([np.median(d[labels == g]) for g in range(int(starts.sum()))])
+        return labels, centres
 
     def select(self, mask: NDArray[np.bool_]) -> SweepTable:
         """The rows where ``mask`` is True."""
@@ -201,11 +221,7 @@ def write_sweep_csv(path: str | Path, table: SweepTable, digits: int | None = 6)
     cols: list[Sequence[object]] = []
     for name in names:
         if name in table.columns:
-            arr = table.columns[name]
-            if name == "n":
-                cols.append([str(round(float(v))) for v in arr])
-            else:
-                cols.append([_fmt(v, digits) for v in arr])
+            cols.append([format_cell(name, v, digits) for v in table.columns[name]])
         else:
             cols.append(table.extra[name])
     with p.open("w", newline="", encoding="utf-8") as fh:
@@ -214,10 +230,84 @@ def write_sweep_csv(path: str | Path, table: SweepTable, digits: int | None = 6)
         w.writerows(zip(*cols, strict=True))
 
 
-def _fmt(value: float, digits: int | None) -> str:
+COUNT_COLUMNS = ("n", "frame", "target_px")
+"""Columns of whole numbers, written without a decimal point."""
+
+
+def format_cell(name: str, value: float, digits: int | None = 6) -> str:
+    """One number of column ``name`` as the sweep CSV writes it: ``digits`` significant
+    digits (None: the shortest text that reads back as the same float), whole numbers for
+    :data:`COUNT_COLUMNS`, empty for NaN."""
     if not math.isfinite(value):
         return ""
+    if name in COUNT_COLUMNS:
+        return str(round(float(value)))
     if digits is None:
-        text = repr(float(value))
-        return text.removesuffix(".0")
+        return repr(float(value)).removesuffix(".0")
     return f"{value:.{digits}g}"
+
+
+class SweepAppender:
+    """Sweep rows written as they are made, each flushed and synced to disk: a run killed at
+    any moment keeps every completed row.
+
+    A new file gets ``columns`` as its header, written with the first row (no rows, no file).
+    With ``append`` an existing file keeps its own header, which must hold the required
+    columns; each row is written in that order (cells of columns a row lacks left empty).
+    Without ``append`` an existing file is refused. :meth:`check` says so before any camera
+    starts (a FieldError naming ``out``, or an InputError naming the file).
+    """
+
+    def __init__(self, path: str | Path, columns: Sequence[str], append: bool = False) -> None:
+        self.path = Path(path)
+        self.columns = list(columns)
+        self.append = append
+        self.rows = 0
+        self._file: io.TextIOWrapper | None = None
+        self._writer: Any = None
+
+    def check(self) -> None:
+        """Refuse an output that exists without ``append``, and with it one whose header
+        lacks a required column or whose last line was left unfinished."""
+        p = self.path
+        if p.is_dir():
+            raise FieldError("out", f"{p} is a folder, not a sweep CSV")
+        if not p.exists():
+            return
+        if not self.append:
+            raise FieldError(
+                "out", f"{p} exists; add --append to add rows to it, or choose another file"
+            )
+        text = read_text(p, "utf-8-sig")
+        header = next(csv.reader(io.StringIO(text, newline="")), None)
+        missing = [c for c in REQUIRED if c not in (h.strip() for h in header or [])]
+        if missing:
+            raise InputError(
+                f"{p}: cannot append: its header lacks {', '.join(missing)} (not a sweep CSV?)"
+            )
+        if not text.endswith("\n"):
+            raise InputError(
+                f"{p}: cannot append: its last line is unfinished (a run killed while "
+                "writing it?); remove that line first"
+            )
+        self.columns = [h.strip() for h in header or []]
+
+    def write(self, row: dict[str, float]) -> None:
+        """Write one row (column -> value) and push it to the disk."""
+        if self._file is None:
+            self.check()
+            new = not self.path.exists()
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = self.path.open("a", newline="", encoding="utf-8")
+            self._writer = csv.writer(self._file)
+            if new:
+                self._writer.writerow(self.columns)
+        self._writer.writerow([format_cell(c, row[c]) if c in row else "" for c in self.columns])
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self.rows += 1
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None

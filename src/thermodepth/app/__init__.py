@@ -11,9 +11,12 @@ module                 use cases
 =====================  ======================================================================
 :mod:`.run`            ``run`` (fuse a stream into measurements, with the sinks it asks for)
 :mod:`.record`         ``record`` (a source into a crash-safe recording)
-:mod:`.calibrate`      ``calibrate``, ``check_calibration``
+:mod:`.calibrate`      ``calibrate``, ``calibrate_camera``, ``check_calibration``
+:mod:`.capture`        ``capture_board`` (the pairs of a stream worth calibrating with)
+:mod:`.collect`        ``collect_sweep`` (sweep rows from a session in front of a plate)
 :mod:`.compensation`   ``fit_compensation``, ``compensate_file``, ``evaluate``, ``paper_tables``
-:mod:`.simulate`       ``sweep``, ``frames``, ``targets`` on the simulated rig
+:mod:`.simulate`       ``sweep``, ``frames``, ``targets``, ``board_session``, ``protocol`` on
+                       the simulated rig
 :mod:`.temperature`    ``counts_to_celsius``
 :mod:`.devices`        ``list_devices``, ``describe_devices``
 :mod:`.demo`           ``run_demo``: the whole story on the simulated rig

@@ -13,11 +13,13 @@ from ..progress import SILENT, Reporter
 from ..sim.lepton import LeptonModel
 from ..sim.protocols import (
     SCENES,
+    ProtocolConfig,
     SweepConfig,
     TargetCaptures,
     aggregate_by_vox,
     session_frames,
     simulate_board_session,
+    simulate_protocol,
     simulate_sweep,
     simulate_targets,
     write_frames,
@@ -85,6 +87,22 @@ def board_session(
         return simulate_board_session(
             out, spec, poses, seed, style, hold_s, move_s, progress=advance
         )
+
+
+def protocol(out: Path, config: ProtocolConfig, reporter: Reporter = SILENT) -> Path:
+    """A recording of the paper's session on the simulated rig, for ``collect-sweep``
+    (:func:`~thermodepth.sim.protocols.simulate_protocol`); the config is checked first."""
+    if not config.distances_m or min(config.distances_m) <= 0:
+        raise FieldError("distances_m", "give one or more distances > 0")
+    check_count("pairs_per_distance", config.pairs_per_distance)
+    if not config.vox_min_c < config.vox_max_c:
+        raise FieldError("vox_min_c", "must be below vox_max_c")
+    for name in ("interval_s", "move_s"):
+        if not getattr(config, name) > 0:
+            raise FieldError(name, "must be > 0 seconds")
+    check_output(out)
+    with reporter.task("protocol", config.pairs) as advance:
+        return simulate_protocol(out, config, advance)
 
 
 def _check_style(style: str) -> None:

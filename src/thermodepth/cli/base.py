@@ -24,6 +24,7 @@ from rich.progress import (
 
 from .. import __version__
 from ..errors import FieldError, ThermodepthError
+from ..progress import SILENT
 
 if TYPE_CHECKING:
     from ..conditions import Conditions
@@ -50,6 +51,7 @@ FLAGS = {
     "preset_name": "--preset",
     "vox_min_c": "--vox-min",
     "distances_m": "--distances",
+    "pairs_per_distance": "--pairs",
     "sweep": "SWEEP",
 }
 """The option of each field whose flag is not ``--`` + the field with dashes."""
@@ -79,6 +81,11 @@ def one_line_errors(func: F) -> F:
 def _error_line(message: str) -> None:
     err_console.print(f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(2)
+
+
+def say_line(message: str) -> None:
+    """A line for the user on stdout, brackets printed as they are."""
+    console.print(message, markup=False, highlight=False, soft_wrap=True)
 
 
 def warn_line(message: str) -> None:
@@ -115,10 +122,15 @@ def _main(
 
 
 class RichReporter:
-    """A :class:`~thermodepth.progress.Reporter` drawing rich progress bars on stderr."""
+    """A :class:`~thermodepth.progress.Reporter` drawing rich progress bars on stderr (none
+    when stderr is not a terminal: a log file gets the command's lines only)."""
 
     @contextmanager
     def task(self, description: str, total: int | None) -> Iterator[Advance]:
+        if not err_console.is_terminal:
+            with SILENT.task(description, total) as advance:
+                yield advance
+            return
         with Progress(
             SpinnerColumn(),
             TextColumn("{task.description}"),

@@ -1,4 +1,5 @@
-"""``temperature``, ``fit-compensation``, ``compensate``, ``evaluate`` and ``paper-tables``."""
+"""``temperature``, ``collect-sweep``, ``fit-compensation``, ``compensate``, ``evaluate`` and
+``paper-tables``."""
 
 from __future__ import annotations
 
@@ -9,16 +10,21 @@ from typing import Annotated, Any
 import typer
 from rich.table import Table
 
+from ..errors import ThermodepthError
 from .base import (
+    BARS,
     AmbientTempC,
     Emissivity,
     HumidityPct,
+    MaxSkewMs,
     ReflectedTempC,
+    ThermalLatencyMs,
     app,
     conditions_of,
     console,
     one_line_errors,
     print_json,
+    say_line,
     warn_line,
 )
 
@@ -45,6 +51,67 @@ def temperature_cmd(
             console.print(f"{s:g} counts -> {t:.3f} C")
         else:  # raw_to_kelvin's NaN: invalid counts, or no object signal above the offset
             console.print(f"{s:g} counts -> none (invalid, or no signal above the surroundings)")
+
+
+@app.command("collect-sweep")
+@one_line_errors
+def collect_sweep_cmd(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Sweep CSV to write.")],
+    reference_temp_c: Annotated[
+        float | None,
+        typer.Option(help="The plate's true temperature, C (its contact thermometer)."),
+    ] = None,
+    source: Annotated[
+        str,
+        typer.Option(help="realsense+lepton (live), recording:PATH, or sim (see README)."),
+    ] = "realsense+lepton",
+    target: Annotated[
+        str,
+        typer.Option(
+            help="auto (the plate: flat, uniform, near the reference temperature), "
+            "rect:U0,V0,U1,V1 (thermal pixels) or depth-range:NEAR,FAR (Z, m)."
+        ),
+    ] = "auto",
+    average: Annotated[int, typer.Option(help="Readings averaged into each row.")] = 1,
+    emissivity: Emissivity = 0.95,
+    ambient_temp_c: AmbientTempC = 25.0,
+    humidity_pct: HumidityPct = 50.0,
+    append: Annotated[
+        bool, typer.Option("--append", help="Add rows to an existing sweep CSV.")
+    ] = False,
+    calibration: Annotated[
+        Path | None,
+        typer.Option(help="The rig's calibration file (a recording keeps its own)."),
+    ] = None,
+    frames: Annotated[int | None, typer.Option(help="Stop after so many pairs.")] = None,
+    max_skew_ms: MaxSkewMs = 20.0,
+    thermal_latency_ms: ThermalLatencyMs = 0.0,
+) -> None:
+    """Read the reference plate in every pair (distance from the depth camera, VOx from the
+    telemetry, mean reading), one sweep CSV row per --average pairs, each on disk as it is
+    made (Ctrl-C keeps them): the input of fit-compensation."""
+    from ..app.collect import CollectOptions, collect_sweep
+    from .measure import print_source_stats
+
+    options = CollectOptions(
+        source,
+        out,
+        reference_temp_c,
+        target,
+        average,
+        conditions_of(emissivity, ambient_temp_c, humidity_pct),
+        append,
+        calibration,
+        frames,
+        max_skew_ms / 1000.0,
+        thermal_latency_ms / 1000.0,
+    )
+    result = collect_sweep(options, BARS, warn_line, say_line)
+    for line in result.outputs:
+        console.print(line, soft_wrap=True, highlight=False)
+    print_source_stats(result)
+    if result.error:
+        raise ThermodepthError(f"{result.error}; {out} keeps every row up to then")
 
 
 @app.command("fit-compensation")
@@ -151,7 +218,7 @@ def print_scores(title: str, rows: list[dict[str, Any]], total: dict[str, Any]) 
     for r in rows:
         table.add_row(
             f"{r['reference_temp_c']:g}",
-            f"{r['distance_m']:g}",
+            f"{r['distance_m']:.3g}",
             str(r["n"]),
             f"{r['mean_c']:.3f}",
             # no such percentage of a 0 C target

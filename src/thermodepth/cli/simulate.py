@@ -1,4 +1,4 @@
-"""``simulate sweep|frames|targets`` and ``demo``: the simulated rig."""
+"""``simulate sweep|frames|targets|board-session|protocol`` and ``demo``: the simulated rig."""
 
 from __future__ import annotations
 
@@ -127,6 +127,46 @@ def simulate_board_session_cmd(
 
     path = board_session(out, board, square_m, poses, seed, style, hold_s, move_s, BARS)
     console.print(f"wrote {path}")
+
+
+@simulate_app.command("protocol")
+@one_line_errors
+def simulate_protocol_cmd(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Recording to create (.zarr).")],
+    distances: Annotated[
+        str, typer.Option(help="The plate's distances in turn, m (comma-separated).")
+    ] = "0.5,1.0,1.5,2.0,2.5",
+    plate_temp_c: Annotated[float, typer.Option(help="The plate's temperature, C.")] = 39.0,
+    pairs: Annotated[int, typer.Option(help="Pairs recorded at each distance.")] = 30,
+    interval_s: Annotated[float, typer.Option(help="Time between recorded pairs, s.")] = 20.0,
+    move_s: Annotated[
+        float, typer.Option(help="Time the plate takes to the next distance, s.")
+    ] = 60.0,
+    vox_min: Annotated[float, typer.Option(help="VOx (FPA) temperature at the start, C.")] = 25.0,
+    vox_max: Annotated[float, typer.Option(help="VOx temperature warmed up to, C.")] = 40.0,
+    ambient_temp_c: AmbientTempC = 25.0,
+    humidity_pct: HumidityPct = 50.0,
+    seed: Seed = 0,
+) -> None:
+    """A recording of the paper's session: the plate at each distance while the camera warms
+    up through its VOx range (FFC frames included), for `thermodepth collect-sweep`."""
+    from ..app.simulate import protocol
+    from ..sim.protocols import ProtocolConfig
+
+    config = ProtocolConfig(
+        tuple(parse_floats(distances, "distances_m")),
+        plate_temp_c,
+        vox_min,
+        vox_max,
+        pairs,
+        interval_s,
+        move_s,
+        ambient_temp_c,
+        humidity_pct,
+        seed,
+    )
+    path = protocol(out, config, BARS)
+    console.print(f"wrote {path}: {config.pairs} pairs")
 
 
 @app.command("demo")

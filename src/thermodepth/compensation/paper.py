@@ -57,12 +57,14 @@ class PaperModel:
         conditions: Conditions | None = None,
     ) -> PaperModel:
         """Least squares per distance on the rows at ``reference_temp_c`` (default: 39 C if
-        the sweep has it, else its most frequent reference temperature). ``conditions`` do
-        not enter: the model works on the readings as they are."""
+        the sweep has it, else its most frequent reference temperature); a measured distance
+        that wanders by millimetres is one calibrated distance, its median
+        (:meth:`~thermodepth.sweep.SweepTable.distance_groups`). ``conditions`` do not enter:
+        the model works on the readings as they are."""
         check_sweep(table)
         ref = _pick_reference(table, reference_temp_c)
         rows = table.select(table["reference_temp_c"] == ref)
-        x, y, d = rows["vox_temp_c"], rows["measured_temp_c"], rows["distance_m"]
+        x, y = rows["vox_temp_c"], rows["measured_temp_c"]
         weights = rows.get("n", 1.0)
         if np.any(x <= 0):
             line = line_of(rows, int(np.argmax(x <= 0)))
@@ -71,8 +73,9 @@ class PaperModel:
                 "VOx temperature in Celsius, which needs x > 0 C (use --method radiance)"
             )
         dists, a, b = [], [], []
-        for dist in np.unique(d):
-            sel = d == dist
+        groups, centres = rows.distance_groups()
+        for g, dist in enumerate(centres):
+            sel = groups == g
             distinct = np.unique(np.round(x[sel], 2)).size
             if distinct < 3:
                 raise InputError(

@@ -173,7 +173,8 @@ class RadianceModel:
             if scored
             else f"degrees {cv.get('degrees')}: the simplest, as nothing can be held out "
             "(one distance and one target)",
-            f"fitted over {d0:g}-{d1:g} m and VOx {v0:g}-{v1:g} C; readings beyond are flagged",
+            f"fitted over {d0:.3g}-{d1:.3g} m and VOx {v0:.3g}-{v1:.3g} C; readings beyond "
+            "are flagged",
         ] + (
             [
                 f"one target temperature ({self.temp_range_c[0]:g} C): the VOx effect is "
@@ -312,8 +313,8 @@ class _Design:
         if not offset_held:
             design = np.concatenate([design, _vox_basis(vox, self.centre, self.scale, h_deg)], 1)
         sw = np.sqrt(self.weight[sel])
-        coef = np.linalg.lstsq(design * sw[:, None], self.w_meas[sel] * sw, rcond=None)[0]
-        coef = coef.astype(np.float64)
+        solved = np.linalg.lstsq(design * sw[:, None], self.w_meas[sel] * sw, rcond=None)[0]
+        coef: FloatArray = solved.astype(np.float64)
         if offset_held:
             return coef, np.zeros(1)
         return coef[: g_deg + 1], coef[g_deg + 1 :]
@@ -321,8 +322,9 @@ class _Design:
     def folds(self) -> dict[str, NDArray[np.bool_]]:
         """Held-out rows per fold, by name: each distance, and each reference temperature
         when there are several (what the model must generalise over)."""
-        distance, reference = self.table["distance_m"], self.table["reference_temp_c"]
-        out = {f"distance {d:g} m": distance == d for d in np.unique(distance)}
+        reference = self.table["reference_temp_c"]
+        groups, centres = self.table.distance_groups()
+        out = {f"distance {d:g} m": groups == g for g, d in enumerate(centres)}
         refs = np.unique(reference)
         if refs.size > 1:
             out |= {f"target {r:g} C": reference == r for r in refs}

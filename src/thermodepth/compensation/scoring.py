@@ -36,12 +36,14 @@ def _groups(
     compensated_c: FloatArray, table: SweepTable
 ) -> Iterator[tuple[float, float, NDArray[np.bool_]]]:
     """(reference temperature, distance, rows) of every group of ``table`` with a finite
-    compensated reading, by reference then distance."""
-    ref, d = table["reference_temp_c"], table["distance_m"]
+    compensated reading, by reference then distance (a placement's median distance:
+    :meth:`~thermodepth.sweep.SweepTable.distance_groups`)."""
+    ref = table["reference_temp_c"]
+    groups, centres = table.distance_groups()
     finite = np.isfinite(compensated_c)
     for r in np.unique(ref):
-        for dist in np.unique(d[ref == r]):
-            sel = (ref == r) & (d == dist) & finite
+        for g, dist in enumerate(centres):
+            sel = (ref == r) & (groups == g) & finite
             if sel.any():
                 yield float(r), float(dist), sel
 

@@ -243,6 +243,7 @@ class LeptonSensor:
         self._last_ffc_end_s: float | None = None
         self._ffc_fpa_k = float(fpa(0.0))  # offsets drift from the FPA temperature at FFC
         self._residual = np.zeros(shape)
+        self._prev_s: float | None = None  # time of the previous read
 
     def _ffc_due(self, time_s: float, fpa_k: float) -> bool:
         assert self._last_ffc_end_s is not None
@@ -251,12 +252,31 @@ class LeptonSensor:
             or abs(fpa_k - self._ffc_fpa_k) >= self.model.ffc_delta_k
         )
 
+    def _fell_due_s(self, time_s: float) -> float:
+        """When the FFC due at ``time_s`` fell due, since the previous read: reads may be
+        seconds apart (a session that keeps one frame in many), and the camera starts its
+        FFC when it falls due, not at the next frame kept. The FPA's crossing of
+        ``ffc_delta_k`` is found by bisection; the timed FFC at its time."""
+        assert self._last_ffc_end_s is not None
+        lo = time_s if self._prev_s is None else self._prev_s
+        hi = min(time_s, max(lo, self._last_ffc_end_s + self.model.ffc_interval_s))
+
+        def moved(t: float) -> bool:
+            return abs(float(self.fpa(t)) - self._ffc_fpa_k) >= self.model.ffc_delta_k
+
+        if not moved(hi):  # the timed FFC, at its time
+            return hi
+        for _ in range(40):  # to well below a microsecond over hours
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if moved(mid) else (mid, hi)
+        return hi
+
     def _state(self, time_s: float, fpa_k: float) -> FfcState:
         m = self.model
         if self._last_ffc_end_s is None and self._ffc_start_s is None:
             self._ffc_start_s = 0.0  # the camera runs an FFC at power-on (t = 0)
         elif self._ffc_start_s is None and self._ffc_due(time_s, fpa_k):
-            self._ffc_start_s = time_s
+            self._ffc_start_s = self._fell_due_s(time_s)
         if self._ffc_start_s is not None:
             end_s = self._ffc_start_s + m.ffc_duration_s
             if time_s < end_s:
@@ -277,6 +297,7 @@ class LeptonSensor:
         m = self.model
         fpa_k = float(self.fpa(time_s))
         state = self._state(time_s, fpa_k)
+        self._prev_s = time_s
         if state == FfcState.IN_PROGRESS:
             # the image shows the closed shutter, at the housing temperature
             shutter = self.table.to_radiance(fpa_k + m.housing_offset_k)

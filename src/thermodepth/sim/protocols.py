@@ -128,11 +128,12 @@ def simulate_sweep(
 
 
 def aggregate_by_vox(table: SweepTable, step_c: float = 1.0) -> SweepTable:
-    """Average rows per (distance, reference, VOx bin of ``step_c``), as the paper's Tables
-    1-5 do; rows are weighted by ``n`` and the result's ``n`` counts the readings in each row.
-    vox_temp_c becomes the bin centre."""
+    """Average rows per (placement of the target, reference, VOx bin of ``step_c``), as the
+    paper's Tables 1-5 do; rows are weighted by ``n`` and the result's ``n`` counts the
+    readings in each row. vox_temp_c becomes the bin centre."""
     vox_bin = np.round(table["vox_temp_c"] / step_c) * step_c
-    keys = np.stack([table["distance_m"], table["reference_temp_c"], vox_bin], axis=1)
+    groups = table.distance_groups()[0]
+    keys = np.stack([groups, table["reference_temp_c"], vox_bin], axis=1)
     uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
     inverse = inverse.ravel()
     weights = table.get("n", 1.0)
@@ -389,6 +390,99 @@ def simulate_board_session(
     settings = {"source": "sim:board-session", "board": str(board), "style": style}
     with RecordingWriter(out, cal, settings, source="sim:board-session") as writer:
         for pair in rig.frames(n_frames):
+            writer.add_match(match_of(pair))
+            if progress:
+                progress(1)
+    return Path(out)
+
+
+@dataclass(frozen=True)
+class ProtocolConfig:
+    """The paper's session (section 4) as a user runs it in front of the rig: the plate at
+    each distance in turn while the camera warms up through its VOx range, recorded.
+
+    distances_m: the plate's distances (Z, metres) in order; plate_temp_c: its temperature;
+    vox_min_c / vox_max_c: the FPA warms from one to the other while the plate stays at a
+    distance, and cools back while it is moved to the next (a sawtooth); pairs_per_distance:
+    pairs recorded at each distance; interval_s: time between recorded pairs (the camera runs
+    at 8.7 fps; a protocol keeps one pair every so often, so the warm-up takes minutes, as a
+    real one does, and the Lepton's FFCs come as often as on a real camera); move_s: time the
+    plate takes to reach the next distance (pairs are recorded while it moves);
+    ambient_temp_c, humidity_pct: the room; seed: all randomness.
+    """
+
+    distances_m: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5)
+    plate_temp_c: float = 39.0
+    vox_min_c: float = 25.0
+    vox_max_c: float = 40.0
+    pairs_per_distance: int = 30
+    interval_s: float = 20.0
+    move_s: float = 60.0
+    ambient_temp_c: float = 25.0
+    humidity_pct: float = 50.0
+    seed: int = 0
+
+    @property
+    def hold_s(self) -> float:
+        """Time the plate stays at each distance (s)."""
+        return self.pairs_per_distance * self.interval_s
+
+    @property
+    def start_s(self) -> float:
+        """Time of the first pair: after the power-on FFC."""
+        return 1.0
+
+    @property
+    def pairs(self) -> int:
+        """Pairs recorded: at the distances and while moving between them."""
+        duration = len(self.distances_m) * self.hold_s + (len(self.distances_m) - 1) * self.move_s
+        return round(duration / self.interval_s)
+
+    def fpa_k(self, time_s: float) -> float:
+        """The FPA temperature (K) at ``time_s``: up from vox_min_c to vox_max_c at each
+        distance, down again while the plate moves."""
+        k, into = divmod(max(time_s - self.start_s, 0.0), self.hold_s + self.move_s)
+        if k >= len(self.distances_m) - 1:  # no move after the last distance: warm it stays
+            into = min(into if k == len(self.distances_m) - 1 else np.inf, self.hold_s)
+        lo, hi = self.vox_min_c, self.vox_max_c
+        if into <= self.hold_s:
+            c = lo + (hi - lo) * into / self.hold_s
+        else:
+            c = hi - (hi - lo) * (into - self.hold_s) / self.move_s
+        return c + ZERO_C_IN_K
+
+
+def simulate_protocol(
+    out: str | Path, config: ProtocolConfig | None = None, progress: Progress | None = None
+) -> Path:
+    """Record the paper's session (:class:`ProtocolConfig`) on the simulated rig into the
+    recording ``out``: pairs (depth and thermal, with telemetry; FFC frames included, marked
+    as such), the rig's true calibration, and the config in the recording's settings."""
+    from dataclasses import asdict
+
+    from ..frames import match_of
+    from ..io.recording import RecordingWriter
+
+    config = config or ProtocolConfig()
+    cal = default_calibration()
+    poses = [camera_pose(d) for d in config.distances_m]
+    rig = Rig(
+        plate_scene(
+            plate_temp_c=config.plate_temp_c,
+            ambient_temp_c=config.ambient_temp_c,
+            relative_humidity=config.humidity_pct / 100.0,
+        ),
+        poses[0],
+        calibration=cal,
+        fpa=config.fpa_k,
+        seed=config.seed,
+        start_s=config.start_s,
+        trajectory=held_and_moved(poses, config.hold_s, config.move_s, config.start_s),
+        frame_interval_s=config.interval_s,
+    )
+    settings = {"source": "sim:protocol", "protocol": asdict(config)}
+    with RecordingWriter(out, cal, settings, source="sim:protocol") as writer:
+        for pair in rig.frames(config.pairs):
             writer.add_match(match_of(pair))
             if progress:
                 progress(1)

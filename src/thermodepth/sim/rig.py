@@ -109,7 +109,9 @@ class Rig:
     time, as real cameras that do not expose at the same instant see a moving scene;
     calibration: the rig's true calibration; fpa: FPA temperature profile; seed: all
     randomness (noise, fixed pattern) follows from it; with_ir: also render the depth
-    camera's infrared image; start_s: time of the first thermal frame.
+    camera's infrared image; start_s: time of the first thermal frame; frame_interval_s: time
+    between the thermal frames it gives (None: every frame, 1 / fps; longer: one frame in so
+    many, as a session that keeps a pair every few seconds).
     Noise-free renders are cached per pose; frames differ by noise and the sensor's state.
     """
 
@@ -124,6 +126,7 @@ class Rig:
     start_s: float = 0.0
     depth_phase_s: float = 0.004
     trajectory: Trajectory | None = None
+    frame_interval_s: float | None = None
 
     def __post_init__(self) -> None:
         if (self.pose.to_frame, self.pose.from_frame) != ("world", "depth"):
@@ -199,11 +202,12 @@ class Rig:
         return self._aperture(self.pose)
 
     def frame(self) -> FramePair:
-        """The next frame pair: thermal frame k at start_s + k / fps, paired with the nearest
+        """The next frame pair: thermal frame k at start_s + k / fps (k frame_interval_s if
+        set), paired with the nearest
         depth frame (30 fps, offset by depth_phase_s); each rendered at its own time's
         pose."""
         k = self._index
-        t_thermal = self.start_s + k / self.lepton.fps
+        t_thermal = self.start_s + k * (self.frame_interval_s or 1.0 / self.lepton.fps)
         j = round((t_thermal - self.depth_phase_s) * self.depth_model.fps)
         t_depth = j / self.depth_model.fps + self.depth_phase_s
         cal = self.calibration

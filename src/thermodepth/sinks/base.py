@@ -27,8 +27,9 @@ class SessionResult:
     (the source ended), ``"interrupted"`` (Ctrl-C), ``"device lost"`` or ``"error"``, with
     ``error``), the recorder's stats if it recorded, the pairing statistics (of the source's
     pairing in time; for sources that do not pair, of the pairs the session saw, with
-    ``pairing_by`` saying who paired them) and the source's counters (frames it skipped, by
-    name; see :meth:`~thermodepth.sources.base.Source.counters`)."""
+    ``pairing_by`` saying who paired them), the source's counters (frames it skipped, by
+    name; see :meth:`~thermodepth.sources.base.Source.counters`) and each sink's closing line
+    for the user (``outputs``)."""
 
     stopped: str = "end"
     error: str | None = None
@@ -36,6 +37,7 @@ class SessionResult:
     pairing: PairingStats | None = None
     pairing_by: str | None = None
     counters: dict[str, int] = field(default_factory=dict)
+    outputs: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
