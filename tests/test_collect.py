@@ -319,10 +319,15 @@ def collect(*args: str) -> tuple[int, str]:
     return result.exit_code, words(result.output)
 
 
+def collect_from(recording: Path, out: Path, *more: str, reference: str = "39") -> tuple[int, str]:
+    """collect-sweep of a recording into ``out``: (exit code, output as one line)."""
+    return collect("--source", f"recording:{recording}", "--reference-temp-c", reference,
+                   "-o", str(out), *more)  # fmt: skip
+
+
 def test_target_never_found(protocol: Path, tmp_path: Path) -> None:
     out = tmp_path / "s.csv"
-    code, text = collect("--source", f"recording:{protocol}", "--reference-temp-c", "80",
-                         "-o", str(out))  # fmt: skip
+    code, text = collect_from(protocol, out, reference="80")
     assert code == 2
     assert text.startswith(
         f"error: recording:{protocol}: the target auto was never found in {PROTOCOL.pairs} pairs"
@@ -344,23 +349,20 @@ def test_reference_temperature_missing(protocol: Path, tmp_path: Path) -> None:
 def test_output_exists_without_append(protocol: Path, tmp_path: Path) -> None:
     out = tmp_path / "s.csv"
     out.write_text("mine\n")
-    code, text = collect("--source", f"recording:{protocol}", "--reference-temp-c", "39",
-                         "-o", str(out))  # fmt: skip
+    code, text = collect_from(protocol, out)
     assert code == 2
     assert text == (
         f"error: --out: {out} exists; add --append to add rows to it, or choose another file"
     )
     assert out.read_text() == "mine\n"
-    code, text = collect("--source", f"recording:{protocol}", "--reference-temp-c", "39",
-                         "-o", str(out), "--append")  # fmt: skip
+    code, text = collect_from(protocol, out, "--append")
     assert code == 2
     assert text == (
         f"error: {out}: cannot append: its header lacks distance_m, vox_temp_c, "
         "measured_temp_c, reference_temp_c (not a sweep CSV?)"
     )
     out.write_text("distance_m,vox_temp_c,measured_temp_c,reference_temp_c\n1,30,37,39\n1,3")
-    code, text = collect("--source", f"recording:{protocol}", "--reference-temp-c", "39",
-                         "-o", str(out), "--append")  # fmt: skip
+    code, text = collect_from(protocol, out, "--append")
     assert code == 2 and "its last line is unfinished" in text
     assert out.read_text().endswith("1,3")
 
@@ -368,8 +370,7 @@ def test_output_exists_without_append(protocol: Path, tmp_path: Path) -> None:
 def test_appended_rows_follow_the_file_header(protocol: Path, tmp_path: Path) -> None:
     out = tmp_path / "s.csv"
     out.write_text("site,distance_m,vox_temp_c,measured_temp_c,reference_temp_c\nlab,1,30,37,39\n")
-    code, text = collect("--source", f"recording:{protocol}", "--reference-temp-c", "39",
-                         "-o", str(out), "--append", "--frames", "4")  # fmt: skip
+    code, text = collect_from(protocol, out, "--append", "--frames", "4")
     assert code == 0, text
     table = read_sweep_csv(out)
     assert table.names == ["site", "distance_m", "vox_temp_c", "measured_temp_c",
@@ -393,8 +394,7 @@ def test_a_source_without_telemetry(tmp_path: Path) -> None:
     ]
     rec = recording_of(pairs, tmp_path / "no-telemetry.zarr")
     out = tmp_path / "s.csv"
-    code, text = collect("--source", f"recording:{rec}", "--reference-temp-c", "39",
-                         "-o", str(out))  # fmt: skip
+    code, text = collect_from(rec, out)
     assert code == 2
     assert text.endswith(
         f"error: recording:{rec}: frame 4: no VOx (FPA) temperature in the telemetry (nan K); "
@@ -408,8 +408,7 @@ def test_tlinear_and_depth_only_sources(tmp_path: Path) -> None:
     rig = Rig(plate_scene(39.0), camera_pose(1.0), start_s=1.0)
     pairs = [replace(p, telemetry=replace(p.telemetry, tlinear=True)) for p in rig.frames(2)]
     rec = recording_of(pairs, tmp_path / "tlinear.zarr")
-    code, text = collect("--source", f"recording:{rec}", "--reference-temp-c", "39",
-                         "-o", str(tmp_path / "s.csv"))  # fmt: skip
+    code, text = collect_from(rec, tmp_path / "s.csv")
     assert code == 2 and "frame 0: the thermal pixels are TLinear kelvin" in text
     code, text = collect("--source", "sim", "--reference-temp-c", "39",
                          "-o", str(tmp_path / "s.csv"))  # fmt: skip
@@ -427,12 +426,16 @@ def test_tlinear_and_depth_only_sources(tmp_path: Path) -> None:
     ],
 )
 def test_bad_targets(protocol: Path, tmp_path: Path, target: str, message: str) -> None:
-    code, text = collect("--source", f"recording:{protocol}", "--reference-temp-c", "39",
-                         "--target", target, "-o", str(tmp_path / "s.csv"))  # fmt: skip
+    code, text = collect_from(protocol, tmp_path / "s.csv", "--target", target)
     assert code == 2 and text.startswith(message), text
 
 
 def test_collect_options_are_checked_before_anything_opens(tmp_path: Path) -> None:
+    code, text = collect("--reference-temp-c", "39", "-o", str(tmp_path / "s.csv"))
+    assert code == 2 and text == (
+        "error: --calibration: realsense+lepton needs the rig's calibration file "
+        "(thermodepth calibrate) to register depth to thermal pixels"
+    )
     with pytest.raises(FieldError, match="must be"):
         collect_sweep(CollectOptions("recording:/nowhere", tmp_path / "s.csv", 39.0, average=0))
     with pytest.raises(InputError, match="nowhere"):

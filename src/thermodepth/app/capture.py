@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .. import sources
 from ..board import BoardSpec
 from ..calibrate.capture import BoardCapture
 from ..calibration import CameraSchema, intrinsics_of
@@ -16,7 +15,7 @@ from ..session import stopping
 from ..sinks import SessionResult
 from ..sources.base import Source
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
-from .run import Warn, check_timing
+from .run import Warn, check_timing, open_pairs
 
 
 @dataclass(frozen=True)
@@ -71,16 +70,9 @@ def capture_board(
     spec = BoardSpec.parse(o.board, o.square_m)
     if o.out_dir.exists() and not o.out_dir.is_dir():
         raise InputError(f"{o.out_dir}: not a folder (pairs go into a folder)")
-    src = sources.open_source(
-        o.source,
-        max_skew_s=o.max_skew_s,
-        with_ir=True,
-        thermal_latency_s=o.thermal_latency_s,
-        warn=warn,
-    )
+    src = open_pairs(o.source, None, None, o.max_skew_s, o.thermal_latency_s, warn, with_ir=True)
     result = CaptureResult(pairing=src.pairing)
     try:
-        src.require_pairs()
         capture = BoardCapture(spec, o.out_dir, _ir_intrinsics(src))
         with reporter.task("capturing board pairs", o.count) as advance, stopping(result):
             for pair in src.pairs():

@@ -17,7 +17,7 @@ from ..session import StreamResult, stream_session
 from ..sinks.sweep import SweepRequest, SweepSink
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
 from ..target import NEAR_REFERENCE_C, TargetSpec
-from .run import Warn, check_timing
+from .run import Warn, check_timing, open_pairs
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,13 @@ class CollectOptions:
         if self.frames is None and self.source.strip() == "sim":
             raise FieldError("source", "sim never ends: give frames")
         check_timing(self.max_skew_s, self.thermal_latency_s)
+        kind = sources.split_spec(self.source)[0][0]
+        if self.calibration is None and kind not in ("recording", "sim"):
+            raise FieldError(
+                "calibration",
+                f"{self.source} needs the rig's calibration file (thermodepth calibrate) to "
+                "register depth to thermal pixels",
+            )
         return TargetSpec.parse(self.target)
 
 
@@ -87,19 +94,9 @@ def collect_sweep(
     sink = SweepSink(options.out, request, options.append, say)
     sink.check()
     cal = Calibration.load(options.calibration) if options.calibration else None
-    src = sources.open_source(
-        options.source,
-        cal,
-        frames=options.frames,
-        max_skew_s=options.max_skew_s,
-        thermal_latency_s=options.thermal_latency_s,
-        warn=warn,
+    src = open_pairs(
+        options.source, cal, options.frames, options.max_skew_s, options.thermal_latency_s, warn
     )
-    try:
-        src.require_pairs()
-    except BaseException:
-        src.close()
-        raise
     result = CollectResult(out=options.out, pairing=src.pairing)
     try:
         stream_session(

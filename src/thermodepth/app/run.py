@@ -53,6 +53,34 @@ def check_timing(max_skew_s: float, thermal_latency_s: float) -> None:
             raise FieldError(name, "must be >= 0")
 
 
+def open_pairs(
+    spec: str,
+    calibration: Calibration | None,
+    frames: int | None,
+    max_skew_s: float,
+    thermal_latency_s: float,
+    warn: Warn | None,
+    with_ir: bool = False,
+) -> sources.Source:
+    """:func:`~thermodepth.sources.open_source` for a session that needs pairs: a source
+    without them (one camera) is refused with one line, and closed."""
+    src = sources.open_source(
+        spec,
+        calibration,
+        frames=frames,
+        max_skew_s=max_skew_s,
+        with_ir=with_ir,
+        thermal_latency_s=thermal_latency_s,
+        warn=warn,
+    )
+    try:
+        src.require_pairs()
+    except BaseException:
+        src.close()
+        raise
+    return src
+
+
 SINK_BUILDERS: list[Callable[[RunOptions], Sink | None]] = [
     lambda o: MeasurementsSink(o.out_dir) if o.out_dir is not None else None,
     lambda o: RecorderSink(o.record) if o.record is not None else None,
@@ -86,16 +114,10 @@ def run(options: RunOptions, sinks: Sequence[Sink] = (), warn: Warn | None = Non
     all_sinks = [*outputs, *sinks]
     for sink in all_sinks:
         sink.check()
-    src = sources.open_source(
-        options.source,
-        cal,
-        frames=options.frames,
-        max_skew_s=options.max_skew_s,
-        thermal_latency_s=options.thermal_latency_s,
-        warn=warn,
+    src = open_pairs(
+        options.source, cal, options.frames, options.max_skew_s, options.thermal_latency_s, warn
     )
     try:
-        src.require_pairs()
         # the source's calibration, else the settings'; Pipeline refuses when neither has one
         pipeline = Pipeline(settings, src.calibration or cal)
         recorded = provenance(options.settings, settings)

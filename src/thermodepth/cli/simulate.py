@@ -29,19 +29,22 @@ simulate_app = typer.Typer(
 app.add_typer(simulate_app, name="simulate")
 
 
+Distances = Annotated[str, typer.Option(help="The plate's distances, m (comma-separated).")]
+VoxMin = Annotated[float, typer.Option(help="The VOx (FPA) temperature at the start, C.")]
+VoxMax = Annotated[float, typer.Option(help="The VOx temperature warmed up to, C.")]
+
+
 @simulate_app.command("sweep")
 @one_line_errors
 def simulate_sweep_cmd(
     out: Annotated[Path, typer.Option("-o", "--out", help="Sweep CSV to write.")],
-    distances: Annotated[
-        str, typer.Option(help="Distances, m (comma-separated).")
-    ] = "0.5,1.0,1.5,2.0,2.5",
+    distances: Distances = "0.5,1.0,1.5,2.0,2.5",
     plate_temps: Annotated[str, typer.Option(help="Plate temperatures, C.")] = "39",
     samples: Annotated[
         int, typer.Option(help="Readings per distance and plate temperature.")
     ] = 6000,
-    vox_min: Annotated[float, typer.Option(help="Lowest VOx (FPA) temperature, C.")] = 25.0,
-    vox_max: Annotated[float, typer.Option(help="Highest VOx (FPA) temperature, C.")] = 40.0,
+    vox_min: VoxMin = 25.0,
+    vox_max: VoxMax = 40.0,
     ambient_temp_c: AmbientTempC = 25.0,
     humidity_pct: HumidityPct = 50.0,
     by_vox: Annotated[
@@ -133,17 +136,15 @@ def simulate_board_session_cmd(
 @one_line_errors
 def simulate_protocol_cmd(
     out: Annotated[Path, typer.Option("-o", "--out", help="Recording to create (.zarr).")],
-    distances: Annotated[
-        str, typer.Option(help="The plate's distances in turn, m (comma-separated).")
-    ] = "0.5,1.0,1.5,2.0,2.5",
+    distances: Distances = "0.5,1.0,1.5,2.0,2.5",
     plate_temp_c: Annotated[float, typer.Option(help="The plate's temperature, C.")] = 39.0,
     pairs: Annotated[int, typer.Option(help="Pairs recorded at each distance.")] = 30,
     interval_s: Annotated[float, typer.Option(help="Time between recorded pairs, s.")] = 20.0,
     move_s: Annotated[
         float, typer.Option(help="Time the plate takes to the next distance, s.")
     ] = 60.0,
-    vox_min: Annotated[float, typer.Option(help="VOx (FPA) temperature at the start, C.")] = 25.0,
-    vox_max: Annotated[float, typer.Option(help="VOx temperature warmed up to, C.")] = 40.0,
+    vox_min: VoxMin = 25.0,
+    vox_max: VoxMax = 40.0,
     ambient_temp_c: AmbientTempC = 25.0,
     humidity_pct: HumidityPct = 50.0,
     seed: Seed = 0,
