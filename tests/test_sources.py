@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from test_telemetry import telemetry_bytes, words_of
-from thermodepth.errors import InputError, ThermodepthError
+from thermodepth.errors import FieldError, InputError, ThermodepthError
 from thermodepth.frames import DepthFrame, FfcState, Telemetry, ThermalFrame
 from thermodepth.io.recording import Recording
 from thermodepth.session import record_session
@@ -296,10 +296,11 @@ def test_realsense_plus_lepton_names_every_missing_device(tmp_path: Path) -> Non
         assert "\n" not in str(lost.value)
         assert "the system library libusb-1.0-0" in str(lost.value)
         return
-    with pytest.raises(InputError) as info:
+    with pytest.raises(FieldError) as info:
         open_source("realsense+lepton:57")
+    assert info.value.field == "source"  # the CLI names it --source
     assert str(info.value) == (
-        "--source realsense+lepton:57: no RealSense device found (is it plugged in?); "
+        "source: realsense+lepton:57: no RealSense device found (is it plugged in?); "
         "/dev/video57: cannot open (no such device)"
     )
 
