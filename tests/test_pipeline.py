@@ -194,7 +194,9 @@ def test_roi_statistics_are_those_of_the_whole_mask() -> None:
 
 def test_shutter_frame_and_bad_counts_keep_the_stream_going() -> None:
     rig = inspection_rig(1.0)
-    pipe = Pipeline(Settings(), rig.calibration)
+    pipe = Pipeline(
+        Settings(rois=[RoiSettings(name="all", rect=(0, 0, 1280, 720))]), rig.calibration
+    )
     pair = rig.frame()
     shut = replace(pair, telemetry=replace(pair.telemetry, ffc_state=2))
     f = pipe.process(shut)
@@ -204,6 +206,7 @@ def test_shutter_frame_and_bad_counts_keep_the_stream_going() -> None:
     f = pipe.process(bad)
     assert np.isnan(f.temp_thermal_c).all() and np.all(f.flags_thermal & PixelFlag.BAD_COUNTS)
     assert np.isnan(f.temp_depth_c).all()
+    assert f.rois[0].n == 0 and f.rois[0].flags & PixelFlag.BAD_COUNTS  # says why it is empty
     good = pipe.process(rig.frame())
     assert np.isfinite(good.temp_thermal_c).mean() > 0.99
 

@@ -37,16 +37,15 @@ from .frames import FramePair, require_raw_counts
 from .measure import (
     AlarmRule,
     AlarmTracker,
-    Box,
     DepthRangeRoi,
     Hotspot,
     PolygonRoi,
     RectRoi,
     Roi,
+    RoiScan,
     RoiStats,
-    bounding_box,
     find_hotspots,
-    roi_stats,
+    scan_roi,
 )
 from .radiometry import (
     MAX_DISTANCE_M,
@@ -331,22 +330,19 @@ class Pipeline:
         except FieldError as exc:
             raise InputError(f"{s.compensation}: {exc.message}") from None
         self.rois = [roi.roi() for roi in s.rois]
-        # fixed shapes on the depth grid: their boxes and masks once, so that each frame
-        # gathers from the box only (depth ranges change each frame)
-        self._roi_regions: list[tuple[Box, NDArray[np.bool_]] | None] = []
-        for i, roi in enumerate(self.rois):
-            if isinstance(roi, DepthRangeRoi):
-                self._roi_regions.append(None)
-                continue
-            mask = roi.mask(calibration.depth.shape)
-            if not mask.any():
+        # where each ROI's pixels are, once: a fixed shape's box and mask, a depth range's
+        # raw depth values (measure.scan_roi reads only those each frame)
+        self._roi_scans = [
+            RoiScan.of(roi, calibration.depth.shape, calibration.depth_scale_m)
+            for roi in self.rois
+        ]
+        for i, (roi, scan) in enumerate(zip(self.rois, self._roi_scans, strict=True)):
+            if not isinstance(roi, DepthRangeRoi) and scan.rows.start == scan.rows.stop:
                 h, w = calibration.depth.shape
                 raise InputError(
                     f"{s.where}: rois.{i}: {roi.name!r} lies outside the {w}x{h} depth image "
                     f"(u 0..{w - 1}, v 0..{h - 1})"
                 )
-            box = bounding_box(mask)
-            self._roi_regions.append((box, mask[box]))
         self.alarms = AlarmTracker(
             [AlarmRule(a.name, a.above_c, a.for_frames, a.what) for a in s.alarms]
         )
@@ -441,13 +437,14 @@ class Pipeline:
             s.hotspots.min_thermal_px,
         )
         frame.rois = []
-        flags, index = frame.flags_thermal.ravel(), frame.thermal_index_depth
-        whole = (slice(None), slice(None))
-        for roi, region in zip(self.rois, self._roi_regions, strict=True):
-            box, mask = region or (whole, roi.mask(cal.depth.shape, frame.depth_m))
-            seen = index[box][mask] if index is not None else np.empty(0, np.int32)
-            stats = roi_stats(roi.name, frame.temp_depth_c[box], mask, flags[seen[seen >= 0]])
-            frame.rois.append(stats)
+        if self.rois:
+            index = frame.thermal_index_depth
+            assert index is not None, "the registration gives it when there are ROIs"
+            flags = frame.flags_thermal.ravel().astype(np.int32)
+            frame.rois = [
+                scan_roi(scan, frame.temp_depth_c, frame.depth, index, flags).stats(roi.name)
+                for roi, scan in zip(self.rois, self._roi_scans, strict=True)
+            ]
         frame.events = self.alarms.update(
             frame.thermal_time_s, frame.index, frame.hotspots, frame.rois
         )
