@@ -9,6 +9,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -17,12 +18,13 @@ import numpy as np
 import pytest
 import zarr
 
-from thermodepth.errors import InputError
+from thermodepth.errors import FieldError, InputError
 from thermodepth.frames import (
     DepthFrame,
     FfcState,
     FramePair,
     Match,
+    StreamEvent,
     Telemetry,
     ThermalFrame,
     pair_of,
@@ -35,9 +37,11 @@ from thermodepth.io.recording import (
     RecordingWarning,
     RecordingWriter,
 )
+from thermodepth.io.recording.reader import READ_AHEAD
 from thermodepth.session import record_session
 from thermodepth.sim import Rig, camera_pose, plate_scene
 from thermodepth.sources import open_source
+from thermodepth.sources.pairing import StreamPairer
 from thermodepth.sources.sim import SimSource
 
 
@@ -140,6 +144,77 @@ def test_raw_streams_and_pairs_as_references(tmp_path: Path) -> None:
     (p,) = list(rec.pairs())
     assert p.depth[0, 0] == 4 and p.depth_time_s == 4 / 30
     assert rec.depth_frame(9).time_s == 9 / 30
+
+
+def live_events(n_depth: int) -> list[StreamEvent]:
+    """What a live rig emits: depth at 30 fps, thermal at 8.7 fps, pairs as they form."""
+    pairer = StreamPairer()
+    events: list[StreamEvent] = []
+    frames: list[DepthFrame | ThermalFrame] = [
+        DepthFrame(np.full((3, 4), i, np.uint16), i / 30, i) for i in range(n_depth)
+    ]
+    frames += [
+        ThermalFrame(np.full((2, 2), k, np.uint16), k / 8.7, k, Telemetry(k, 300.0, 299.0))
+        for k in range(int(n_depth / 30 * 8.7))
+    ]
+    for f in sorted(frames, key=lambda f: f.time_s):
+        events.append(f)
+        events += pairer.add_depth(f) if isinstance(f, DepthFrame) else pairer.add_thermal(f)
+    return events + pairer.flush()
+
+
+@pytest.mark.parametrize("via", ["writer", "recorder"])
+def test_paired_depth_keeps_only_the_depth_frames_that_pair(tmp_path: Path, via: str) -> None:
+    events = live_events(60)
+    recs = {}
+    for mode in ("all", "paired"):
+        w = RecordingWriter(tmp_path / f"{mode}.zarr", depth_frames=mode)
+        if via == "writer":
+            with w:
+                for e in events:
+                    w.add(e)
+        else:
+            with Recorder(w, block=True) as r:
+                for e in events:
+                    r.add(e)
+        recs[mode] = Recording(tmp_path / f"{mode}.zarr")
+    every, paired = recs["all"], recs["paired"]
+    assert (every.depth_frames, paired.depth_frames) == ("all", "paired")
+    assert every.n_depth == 60 and every.n_pairs == paired.n_pairs == 17
+    assert paired.n_depth == paired.n_pairs  # one depth frame per pair, no more
+    for a, b in zip(every.pairs(), paired.pairs(), strict=True):
+        assert_same_pair(a, b)
+
+
+def test_paired_depth_needs_both_cameras(tmp_path: Path) -> None:
+    depth = [DepthFrame(np.full((3, 4), i, np.uint16), i / 30, i) for i in range(3)]
+    with RecordingWriter(tmp_path / "d.zarr") as w:
+        for d in depth:
+            w.add(d)
+    src = open_source(f"recording:{tmp_path / 'd.zarr'}")
+    with pytest.raises(InputError, match="gives depth only; FramePairs need"):
+        record_session(src, tmp_path / "p.zarr", depth_frames="paired")
+    with pytest.raises(FieldError, match=r"^depth_frames: expected one of all, paired$"):
+        RecordingWriter(tmp_path / "x.zarr", depth_frames="some")
+
+
+def test_replay_reads_ahead_in_batches_bit_for_bit(tmp_path: Path) -> None:
+    # more pairs than a batch, one corrupt chunk inside the second: only its pair is lost
+    out = tmp_path / "b.zarr"
+    n = 2 * READ_AHEAD + 3
+    record_session(SimSource(sim_rig()), out, frames=n)
+    one_by_one = [Recording(out).depth_frame(i).depth for i in range(n)]
+    chunk = out / "depth" / "image" / "c" / str(READ_AHEAD + 2) / "0" / "0"
+    chunk.write_bytes(b"torn")
+    lines: list[str] = []
+    got = list(Recording(out, warn=lines.append).pairs())
+    assert [p.index for p in got] == [i for i in range(n) if i != READ_AHEAD + 2]
+    for p in got:
+        assert np.array_equal(p.depth, one_by_one[p.index])
+    assert len(lines) == 1 and f"pair {READ_AHEAD + 2} skipped" in lines[0]
+    first = next(iter(Recording(out).pairs()))  # stopping early leaves no thread behind
+    assert first.index == 0
+    assert not [t for t in threading.enumerate() if t.name.startswith("replay-read")]
 
 
 def test_a_recording_of_one_camera_replays_its_frames(tmp_path: Path) -> None:

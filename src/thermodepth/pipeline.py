@@ -333,8 +333,7 @@ class Pipeline:
         # where each ROI's pixels are, once: a fixed shape's box and mask, a depth range's
         # raw depth values (measure.scan_roi reads only those each frame)
         self._roi_scans = [
-            RoiScan.of(roi, calibration.depth.shape, calibration.depth_scale_m)
-            for roi in self.rois
+            RoiScan.of(roi, calibration.depth.shape, calibration.depth_scale_m) for roi in self.rois
         ]
         for i, (roi, scan) in enumerate(zip(self.rois, self._roi_scans, strict=True)):
             if not isinstance(roi, DepthRangeRoi) and scan.rows.start == scan.rows.stop:

@@ -158,11 +158,13 @@ def record_session(
     calibration: Calibration | None = None,
     overwrite: bool = False,
     reporter: Reporter = SILENT,
+    depth_frames: str = "all",
 ) -> RecordResult:
     """Record ``source`` into a new recording at ``out`` (:func:`stream_session` with the
-    recorder as its one sink: the recording keeps every frame written, whatever ends it)."""
+    recorder as its one sink: the recording keeps every frame written, whatever ends it);
+    ``depth_frames``: all of them, or only the ``"paired"`` ones."""
     result = RecordResult(path=Path(out), pairing=source.pairing)
-    recorder = RecorderSink(out, overwrite=overwrite)
+    recorder = RecorderSink(out, overwrite=overwrite, depth_frames=depth_frames)
     try:
         stream_session(
             source,

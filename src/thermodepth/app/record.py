@@ -8,7 +8,7 @@ from pathlib import Path
 from .. import sources
 from ..calibration import Calibration
 from ..errors import FieldError, check_count
-from ..io.recording import check_output
+from ..io.recording import DEPTH_FRAMES, check_output
 from ..progress import SILENT, Reporter
 from ..session import RecordResult, record_session
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
@@ -24,7 +24,9 @@ class RecordOptions:
     calibration: a calibration file to store (a RealSense's own depth intrinsics replace its
     depth section; sim and recordings keep theirs); max_skew_s, thermal_latency_s: pairing of
     live cameras (s); with_ir: also the infrared image; overwrite: replace an existing
-    recording (nothing else is replaced).
+    recording (nothing else is replaced); depth_frames: keep ``"all"`` the depth frames or
+    only those ``"paired"`` with a thermal frame (3.4x fewer at 30 + 8.7 fps; needs both
+    cameras).
     """
 
     source: str
@@ -36,6 +38,7 @@ class RecordOptions:
     thermal_latency_s: float = 0.0
     with_ir: bool = False
     overwrite: bool = False
+    depth_frames: str = "all"
 
     def check(self) -> None:
         """One FieldError for an option that cannot be (a simulator with no end included)."""
@@ -45,6 +48,8 @@ class RecordOptions:
         if self.duration_s is None and self.frames is None and self.source.strip() == "sim":
             raise FieldError("source", "sim never ends: give frames or a duration")
         check_timing(self.max_skew_s, self.thermal_latency_s)
+        if self.depth_frames not in DEPTH_FRAMES:
+            raise FieldError("depth_frames", f"expected one of {', '.join(DEPTH_FRAMES)}")
 
 
 def record(
@@ -71,4 +76,5 @@ def record(
         calibration=cal,
         overwrite=options.overwrite,
         reporter=reporter,
+        depth_frames=options.depth_frames,
     )

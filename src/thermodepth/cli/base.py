@@ -53,6 +53,7 @@ FLAGS = {
     "distances_m": "--distances",
     "pairs_per_distance": "--pairs",
     "sweep": "SWEEP",
+    "depth_frames": "--depth",
 }
 """The option of each field whose flag is not ``--`` + the field with dashes."""
 

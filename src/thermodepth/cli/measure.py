@@ -73,6 +73,15 @@ def record_cmd(
         bool,
         typer.Option("--overwrite", help="Replace an existing recording (nothing else)."),
     ] = False,
+    depth: Annotated[
+        str,
+        typer.Option(
+            "--depth",
+            metavar="all|paired",
+            help="Depth frames to keep: all (30 fps), or only those that pair with a thermal "
+            "frame (8.7 fps, 3.4x less to store; all that a replay measures).",
+        ),
+    ] = "all",
 ) -> None:
     """Record a source into a crash-safe Zarr v3 recording (Ctrl-C stops cleanly)."""
     from ..app.record import RecordOptions, record
@@ -87,6 +96,7 @@ def record_cmd(
         thermal_latency_ms / 1000.0,
         ir,
         overwrite,
+        depth,
     )
     result = record(options, BARS, warn_line)
     console.print(

@@ -16,15 +16,17 @@ class RecorderSink(BaseSink):
 
     The recording stores the source's calibration (else the one frames are fused with, else
     the user's), the source's settings with the run's provenance, and the depth camera's own
-    intrinsics where the source has them. It blocks for files and the simulator (nothing
-    dropped) and drops for live cameras (never stalls them). It refuses to write over a path
-    the source reads. Closed with why the session stopped, the pairing statistics and the
-    source's counters (:func:`~thermodepth.session.closing_attrs`).
+    intrinsics where the source has them; ``depth_frames``: all of them or only the
+    ``"paired"`` ones (:class:`~thermodepth.io.recording.RecordingWriter`). It blocks for
+    files and the simulator (nothing dropped) and drops for live cameras (never stalls them).
+    It refuses to write over a path the source reads. Closed with why the session stopped,
+    the pairing statistics and the source's counters (:func:`~thermodepth.session.closing_attrs`).
     """
 
-    def __init__(self, out: str | Path, overwrite: bool = False) -> None:
+    def __init__(self, out: str | Path, overwrite: bool = False, depth_frames: str = "all") -> None:
         self.out = Path(out)
         self.overwrite = overwrite
+        self.depth_frames = depth_frames
         self.recorder: Recorder | None = None
 
     @property
@@ -37,6 +39,8 @@ class RecorderSink(BaseSink):
 
     def open(self, context: RunContext) -> None:
         source = context.source
+        if self.depth_frames == "paired":
+            source.require_pairs()  # else nothing pairs, and no depth frame is kept
         writer = RecordingWriter(
             self.out,
             source.calibration or context.calibration,
@@ -45,6 +49,7 @@ class RecorderSink(BaseSink):
             overwrite=self.overwrite,
             inputs=source.files,
             device_depth=source.device_depth,
+            depth_frames=self.depth_frames,
         )
         self.recorder = Recorder(writer, block=not source.live)
 

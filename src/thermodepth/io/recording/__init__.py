@@ -6,6 +6,7 @@
 """
 
 from .format import (
+    DEPTH_FRAMES,
     FORMAT,
     TABLE_CHUNK_ROWS,
     VERSION,
@@ -23,6 +24,7 @@ from .reader import Recording
 from .writer import Recorder, RecorderStats, RecordingWriter
 
 __all__ = [
+    "DEPTH_FRAMES",
     "FORMAT",
     "TABLE_CHUNK_ROWS",
     "VERSION",

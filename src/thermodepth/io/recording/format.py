@@ -59,6 +59,10 @@ THERMAL_META = (
     "tlinear_resolution_k",
 )
 PAIR_COLUMNS = ("depth_row", "thermal_row", "index")
+DEPTH_FRAMES = ("all", "paired")
+"""Which depth frames a recording keeps (attribute ``depth_frames``): every one the camera
+gave (30 fps), or only those that pair with a thermal frame (8.7 fps: 3.4x fewer, all that a
+replay measures). A recording without the attribute keeps all."""
 FIRST_CAPACITY = 64
 TABLE_CHUNK_ROWS = 256
 """Rows per chunk of the meta and pair tables (one file each): a row write rewrites its

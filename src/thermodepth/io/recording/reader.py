@@ -7,6 +7,7 @@ import heapq
 import re
 import warnings
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -228,37 +229,87 @@ class Recording:
         return {str(k): int(v) for k, v in value.items()} if isinstance(value, dict) else {}
 
     @property
+    def depth_frames(self) -> str:
+        """Which depth frames the recording keeps: ``"all"``, or only those ``"paired"`` with
+        a thermal frame (:data:`~thermodepth.io.recording.format.DEPTH_FRAMES`)."""
+        return str(self.attrs.get("depth_frames", "all"))
+
+    @property
     def with_ir(self) -> bool:
         return "depth/ir" in self._arrays
 
-    def _read(
-        self, stream: str, row: int, names: tuple[str, ...]
-    ) -> tuple[NDArray[np.float64], list[NDArray[Any]]]:
-        """Frame ``row`` of ``stream``: its meta row and its arrays ``names``, checked against
-        the CRC; CorruptFrameError if they cannot be read or do not match."""
+    def _arrays_of(self, stream: str) -> tuple[str, ...]:
+        return ("image", "ir") if stream == "depth" and self.with_ir else ("image",)
+
+    def _frame(self, stream: str, row: int, meta: NDArray[Any], arrays: list[Any]) -> Any:
+        """The frame at ``row`` from its meta row and arrays, checked against the CRC-32;
+        CorruptFrameError if they do not match."""
+        if checksum(*arrays) != int(meta[2]):
+            raise CorruptFrameError(f"{stream} frame {row}: pixels do not match their CRC-32")
+        if stream == "depth":
+            ir = arrays[1] if self.with_ir else None
+            return DepthFrame(arrays[0], float(meta[0]), int(meta[1]), ir)
+        return ThermalFrame(arrays[0], float(meta[0]), int(meta[1]), telemetry_from_row(meta[3:]))
+
+    def _frames_at(self, stream: str, rows: list[int]) -> list[Any]:
+        """The frames of ``stream`` at ``rows`` (in that order, repeats allowed), each a frame
+        or the CorruptFrameError that stops it. Each run of consecutive rows is read with one
+        zarr call per array (zarr fetches and decodes its chunks concurrently, blosc without
+        the GIL); a run with a corrupt chunk is read again row by row, so that costs its
+        frame only."""
         table = self._depth if stream == "depth" else self._thermal
-        table.check(row, f"{stream} frame {row}: meta row")
-        meta = table.rows[row]
+        out: list[Any] = [None] * len(rows)
+        usable: dict[int, list[int]] = {}  # row -> its places in ``rows``
+        for k, row in enumerate(rows):
+            try:
+                table.check(row, f"{stream} frame {row}: meta row")
+                usable.setdefault(row, []).append(k)
+            except CorruptFrameError as exc:
+                out[k] = exc
+        names = self._arrays_of(stream)
+        for first, last in _runs(sorted(usable)):
+            try:
+                blocks = [
+                    np.asarray(self._arrays[f"{stream}/{n}"][first : last + 1]) for n in names
+                ]
+            except Exception:  # a corrupt chunk among them: one by one
+                blocks = None
+            for row in range(first, last + 1):
+                try:
+                    if blocks is None:
+                        arrays = [self._chunk(stream, n, row) for n in names]
+                    else:
+                        arrays = [b[row - first] for b in blocks]
+                    frame: Any = self._frame(stream, row, table.rows[row], arrays)
+                except CorruptFrameError as exc:
+                    frame = exc
+                for k in usable[row]:
+                    out[k] = frame
+        return out
+
+    def _chunk(self, stream: str, name: str, row: int) -> NDArray[Any]:
         try:
-            arrays = [np.asarray(self._arrays[f"{stream}/{n}"][row]) for n in names]
+            return np.asarray(self._arrays[f"{stream}/{name}"][row])
         except Exception as exc:
             raise CorruptFrameError(
                 f"{stream} frame {row}: unreadable chunk ({short_error(exc)})"
             ) from None
-        if checksum(*arrays) != int(meta[2]):
-            raise CorruptFrameError(f"{stream} frame {row}: pixels do not match their CRC-32")
-        return meta, arrays
+
+    def _one(self, stream: str, row: int) -> Any:
+        (frame,) = self._frames_at(stream, [row])
+        if isinstance(frame, CorruptFrameError):
+            raise frame
+        return frame
 
     def depth_frame(self, row: int) -> DepthFrame:
         """The depth frame at ``row``; CorruptFrameError if it cannot be read or fails its CRC."""
-        meta, arrays = self._read("depth", row, ("image", "ir") if self.with_ir else ("image",))
-        ir = arrays[1] if self.with_ir else None
-        return DepthFrame(arrays[0], float(meta[0]), int(meta[1]), ir)
+        frame: DepthFrame = self._one("depth", row)
+        return frame
 
     def thermal_frame(self, row: int) -> ThermalFrame:
         """The thermal frame at ``row`` with its telemetry; CorruptFrameError as depth_frame."""
-        meta, (counts,) = self._read("thermal", row, ("image",))
-        return ThermalFrame(counts, float(meta[0]), int(meta[1]), telemetry_from_row(meta[3:]))
+        frame: ThermalFrame = self._one("thermal", row)
+        return frame
 
     def _readable(self, rows: Iterable[Any], what: str, read: Callable[..., Any]) -> Iterator[Any]:
         """``read(*row)`` for each row; unreadable ones skipped and counted: one warning line
@@ -295,28 +346,74 @@ class Recording:
 
     def matches(self) -> Iterator[Match]:
         """Every recorded pair with its frames, in order; unreadable ones skipped and
-        counted (one warning line each, or one per table chunk warned about on open)."""
+        counted (one warning line each, or one per table chunk warned about on open). The
+        pairs are read :data:`READ_AHEAD` at a time by a thread, a batch ahead of the one
+        being used, so decoding overlaps the caller's work."""
 
-        def read(i: int, d_row: int, t_row: int, index: int) -> Match:
-            self._pairs.check(i, "pair row")
-            d = self.depth_frame(int(d_row))
-            t = self.thermal_frame(int(t_row))
-            return Match(d, t, pair_of(d, t, int(index)))
+        def read_batch(batch: list[tuple[int, ...]]) -> list[Any]:
+            depth = self._frames_at("depth", [int(r[1]) for r in batch])
+            thermal = self._frames_at("thermal", [int(r[2]) for r in batch])
+            out: list[Any] = []
+            for (i, _, _, index), d, t in zip(batch, depth, thermal, strict=True):
+                try:
+                    self._pairs.check(i, "pair row")
+                    for frame in (d, t):
+                        if isinstance(frame, CorruptFrameError):
+                            raise frame
+                    out.append(Match(d, t, pair_of(d, t, int(index))))
+                except CorruptFrameError as exc:
+                    out.append(exc)
+            return out
 
-        rows = ((i, *row) for i, row in enumerate(self._pairs.rows.tolist()))
-        yield from self._readable(rows, "pair", read)
+        rows = [(i, *row) for i, row in enumerate(self._pairs.rows.tolist())]
+        yield from self._readable(((m,) for m in _read_ahead(rows, read_batch)), "pair", _given)
 
     def frames(self) -> Iterator[DepthFrame | ThermalFrame]:
         """Every recorded depth and thermal frame, in time order (what a recording of one
         camera holds: it has no pairs); unreadable ones skipped and counted as in
-        :meth:`matches`."""
-        depth = self._readable(((r,) for r in range(self.n_depth)), "depth frame", self.depth_frame)
-        thermal = self._readable(
-            ((r,) for r in range(self.n_thermal)), "thermal frame", self.thermal_frame
+        :meth:`matches`, read ahead as there."""
+
+        def stream(name: str, n: int) -> Iterator[Any]:
+            found = _read_ahead(list(range(n)), lambda rows: self._frames_at(name, rows))
+            return self._readable(((f,) for f in found), f"{name} frame", _given)
+
+        yield from heapq.merge(
+            stream("depth", self.n_depth),
+            stream("thermal", self.n_thermal),
+            key=lambda f: f.time_s,
         )
-        yield from heapq.merge(depth, thermal, key=lambda f: f.time_s)
 
     def pairs(self) -> Iterator[FramePair]:
         """The recorded FramePairs, bit for bit (see :meth:`matches`)."""
         for m in self.matches():
             yield m.pair
+
+
+READ_AHEAD = 8
+"""Frames or pairs a replay reads at once, on a thread, one batch ahead of the caller:
+enough that zarr's per-call cost is shared (measured in docs/recording.md, "Replay")."""
+
+
+def _given(item: Any) -> Any:
+    """What a read-ahead thread found: the item, or the CorruptFrameError it met."""
+    if isinstance(item, CorruptFrameError):
+        raise item
+    return item
+
+
+def _read_ahead(rows: list[Any], read: Callable[[list[Any]], list[Any]]) -> Iterator[Any]:
+    """``read(batch)`` for each batch of :data:`READ_AHEAD` rows, run on a thread one batch
+    ahead of the consumer; yields the items in order. A consumer that stops early stops the
+    thread after the batch in hand."""
+    batches = [rows[a : a + READ_AHEAD] for a in range(0, len(rows), READ_AHEAD)]
+    if not batches:
+        return
+    with ThreadPoolExecutor(1, thread_name_prefix="replay-read") as pool:
+        ahead = pool.submit(read, batches[0])
+        try:
+            for nxt in batches[1:]:
+                done, ahead = ahead, pool.submit(read, nxt)
+                yield from done.result()
+            yield from ahead.result()
+        finally:
+            ahead.cancel()

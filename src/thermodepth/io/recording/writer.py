@@ -17,9 +17,10 @@ import zarr
 from numpy.typing import NDArray
 
 from ...calibration import Calibration
-from ...errors import InputError
+from ...errors import FieldError, InputError
 from ...frames import DepthFrame, FramePair, Match, StreamEvent, ThermalFrame, match_of
 from .format import (
+    DEPTH_FRAMES,
     DEPTH_META,
     FORMAT,
     PAIR_COLUMNS,
@@ -123,7 +124,9 @@ class RecordingWriter:
     stored as an attribute (the depth intrinsics from the device plus the user's
     thermal/extrinsics); settings: any JSON-able mapping (source spec, pairing threshold,
     ...); device_depth: the depth camera's own intrinsics and depth unit (a calibration
-    file's ``depth`` section), stored whether or not a calibration is.
+    file's ``depth`` section), stored whether or not a calibration is; depth_frames: keep
+    ``"all"`` the depth frames, or only those ``"paired"`` with a thermal frame (a depth frame
+    alone is then not written; :data:`~thermodepth.io.recording.format.DEPTH_FRAMES`).
     """
 
     def __init__(
@@ -135,7 +138,11 @@ class RecordingWriter:
         overwrite: bool = False,
         inputs: tuple[Path, ...] = (),
         device_depth: dict[str, Any] | None = None,
+        depth_frames: str = "all",
     ) -> None:
+        if depth_frames not in DEPTH_FRAMES:
+            raise FieldError("depth_frames", f"expected one of {', '.join(DEPTH_FRAMES)}")
+        self.depth_frames = depth_frames
         self.path = check_output(path, overwrite, inputs)
         try:
             self.root = zarr.open_group(str(self.path), mode="w", zarr_format=3)
@@ -150,6 +157,7 @@ class RecordingWriter:
                 "calibration": None if calibration is None else calibration.to_dict(),
                 "settings": settings or {},
                 "device_depth": device_depth,
+                "depth_frames": depth_frames,
                 "complete": False,
             }
         )
@@ -207,11 +215,13 @@ class RecordingWriter:
         self.add_pair_rows(d, t, match.pair.index)
 
     def add(self, event: StreamEvent) -> None:
-        """Write what a source emitted (a depth frame, a thermal frame or a match)."""
+        """Write what a source emitted (a depth frame, a thermal frame or a match); a depth
+        frame alone is skipped when only paired ones are kept (its match writes it)."""
         if isinstance(event, Match):
             self.add_match(event)
         elif isinstance(event, DepthFrame):
-            self.add_depth(event)
+            if self.depth_frames == "all":
+                self.add_depth(event)
         else:
             self.add_thermal(event)
 
@@ -320,6 +330,8 @@ class Recorder:
     def add(self, event: StreamEvent) -> None:
         if self._error is not None:
             raise self._error
+        if isinstance(event, DepthFrame) and self.writer.depth_frames == "paired":
+            return  # its match, if it pairs, brings it
         if isinstance(event, Match) and (
             event.depth.index in self._dropped_depth or event.thermal.index in self._dropped_thermal
         ):
