@@ -11,6 +11,8 @@ BENCHMARKS = [
     "bench_compensation",
     "bench_pipeline",
     "bench_recording",
+    "bench_replay",
+    "bench_codecs",
     "bench_detection",
 ]
 
