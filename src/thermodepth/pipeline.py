@@ -296,7 +296,8 @@ class Pipeline:
     calibration: overrides ``settings.calibration`` (e.g. the one a source or recording
     carries). Raises InputError when neither gives one, or a frame's size does not match it.
     registration: one to share between pipelines of the same calibration and registration
-    method (building one takes ~50 ms).
+    method (building one takes ~50 ms). model: the compensation model already loaded from
+    ``settings.compensation`` (a batch ships it to workers that cannot read the file).
     """
 
     def __init__(
@@ -304,6 +305,7 @@ class Pipeline:
         settings: Settings | None = None,
         calibration: Calibration | None = None,
         registration: Registration | None = None,
+        model: CompensationModel | None = None,
     ) -> None:
         self.settings = s = settings or Settings()
         if calibration is None:
@@ -321,9 +323,9 @@ class Pipeline:
         ):
             raise ValueError("the shared registration is of another calibration or method")
         self.registration = registration
-        self.model: CompensationModel = (
-            load_model(s.compensation) if s.compensation is not None else NoCompensation()
-        )
+        if model is None:
+            model = load_model(s.compensation) if s.compensation is not None else NoCompensation()
+        self.model: CompensationModel = model
         r = s.radiometry
         try:
             self.radiometry = self.model.radiometry(r.conditions(), r.constants(), r.method)

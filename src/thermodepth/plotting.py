@@ -25,3 +25,13 @@ def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
     fig.savefig(out, dpi=dpi)
     pyplot().close(fig)
     return out
+
+
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
+def distinct_styles(n: int) -> list[tuple[Any, str]]:
+    """``n`` (colour, marker) pairs that tell lines apart in colour and in grey print: the
+    tab10 colours with a marker each (repeating after 10 and 8)."""
+    colors = pyplot().get_cmap("tab10").colors
+    return [(colors[i % len(colors)], MARKERS[i % len(MARKERS)]) for i in range(n)]

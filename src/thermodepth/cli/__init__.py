@@ -7,11 +7,20 @@ gave the field (``--emissivity: ...``). One module per group of commands; :mod:`
 the app, the error handling and the shared options.
 """
 
-from . import calibrate, compensation, measure, simulate
+from . import batch, calibrate, compensation, measure, simulate
 from .base import app
 from .measure import print_frame
 
-__all__ = ["app", "calibrate", "compensation", "main", "measure", "print_frame", "simulate"]
+__all__ = [
+    "app",
+    "batch",
+    "calibrate",
+    "compensation",
+    "main",
+    "measure",
+    "print_frame",
+    "simulate",
+]
 
 
 def main() -> None:

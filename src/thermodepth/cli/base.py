@@ -54,6 +54,7 @@ FLAGS = {
     "pairs_per_distance": "--pairs",
     "sweep": "SWEEP",
     "depth_frames": "--depth",
+    "recordings": "RECORDING",
 }
 """The option of each field whose flag is not ``--`` + the field with dashes."""
 

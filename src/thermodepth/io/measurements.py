@@ -4,8 +4,11 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +47,59 @@ def jsonable(x: Any) -> Any:
     return value
 
 
+def csv_line(row: Sequence[Any]) -> str:
+    """One CSV row as text, as :mod:`csv`'s default dialect writes it (ended by ``\\r\\n``)."""
+    buf = io.StringIO()
+    csv.writer(buf).writerow(row)
+    return buf.getvalue()
+
+
+HOTSPOTS_HEADER = csv_line(HOTSPOT_COLUMNS)
+
+
+@dataclass(frozen=True)
+class FrameLines:
+    """What one fused frame adds to each file, as text: its ``measurements.jsonl`` line, its
+    ``alarms.jsonl`` lines and its ``hotspots.csv`` rows (each ended by its newline)."""
+
+    frame: str
+    alarms: list[str]
+    hotspots: list[str]
+
+    @classmethod
+    def of(cls, fused: Any) -> FrameLines:
+        """The lines of a :class:`~thermodepth.pipeline.FusedFrame`."""
+        rows = []
+        for h in fused.hotspots:
+            x, y, z = h.centroid_m
+            rows.append(
+                csv_line(
+                    [
+                        fused.index,
+                        f"{fused.thermal_time_s:.4f}",
+                        f"{fused.vox_temp_c:.2f}",
+                        h.label,
+                        f"{h.max_c:.3f}",
+                        f"{h.mean_c:.3f}",
+                        f"{x:.4f}",
+                        f"{y:.4f}",
+                        f"{z:.4f}",
+                        f"{h.distance_m:.4f}",
+                        f"{h.area_m2:.6g}",
+                        h.thermal_px,
+                        int(h.resolvable),
+                        f"{h.power_w:.4g}",
+                        h.flags,
+                    ]
+                )
+            )
+        return cls(
+            json.dumps(jsonable(fused.summary())) + "\n",
+            [json.dumps(jsonable(event)) + "\n" for event in fused.events],
+            rows,
+        )
+
+
 class MeasurementWriter:
     """Writes the measurements of fused frames into ``out_dir`` as they come; ``close()``
     (or ``with``) flushes. Every line is complete when written."""
@@ -54,42 +110,24 @@ class MeasurementWriter:
         frames, alarms, hotspots = (out / name for name in FILES)
         self._frames = open(frames, "w", encoding="utf-8")  # noqa: SIM115
         self._alarms = open(alarms, "w", encoding="utf-8")  # noqa: SIM115
-        self._hot_file = open(hotspots, "w", newline="", encoding="utf-8")  # noqa: SIM115
-        self._hotspots = csv.writer(self._hot_file)
-        self._hotspots.writerow(HOTSPOT_COLUMNS)
+        self._hotspots = open(hotspots, "w", newline="", encoding="utf-8")  # noqa: SIM115
+        self._hotspots.write(HOTSPOTS_HEADER)
 
     def write(self, fused: Any) -> None:
         """One fused frame (a :class:`~thermodepth.pipeline.FusedFrame`)."""
-        self._frames.write(json.dumps(jsonable(fused.summary())) + "\n")
-        for event in fused.events:
-            self._alarms.write(json.dumps(jsonable(event)) + "\n")
-        for h in fused.hotspots:
-            x, y, z = h.centroid_m
-            self._hotspots.writerow(
-                [
-                    fused.index,
-                    f"{fused.thermal_time_s:.4f}",
-                    f"{fused.vox_temp_c:.2f}",
-                    h.label,
-                    f"{h.max_c:.3f}",
-                    f"{h.mean_c:.3f}",
-                    f"{x:.4f}",
-                    f"{y:.4f}",
-                    f"{z:.4f}",
-                    f"{h.distance_m:.4f}",
-                    f"{h.area_m2:.6g}",
-                    h.thermal_px,
-                    int(h.resolvable),
-                    f"{h.power_w:.4g}",
-                    h.flags,
-                ]
-            )
+        self.write_lines(FrameLines.of(fused))
+
+    def write_lines(self, lines: FrameLines) -> None:
+        """One frame's lines (:class:`FrameLines`)."""
+        self._frames.write(lines.frame)
+        self._alarms.writelines(lines.alarms)
+        self._hotspots.writelines(lines.hotspots)
         # whole lines on disk as each frame ends: a killed run keeps every frame it measured
-        for f in (self._frames, self._alarms, self._hot_file):
+        for f in (self._frames, self._alarms, self._hotspots):
             f.flush()
 
     def close(self) -> None:
-        for f in (self._frames, self._alarms, self._hot_file):
+        for f in (self._frames, self._alarms, self._hotspots):
             f.close()
 
     def __enter__(self) -> MeasurementWriter:

@@ -193,6 +193,12 @@ def check_output(path: str | Path, overwrite: bool = False, inputs: tuple[Path, 
     return out
 
 
+def is_url(path: str | Path) -> bool:
+    """True for an fsspec URL (``file:///data/a.zarr``, ``s3://bucket/a.zarr``), False for a
+    local path."""
+    return isinstance(path, str) and "://" in path
+
+
 def short_error(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__

@@ -18,13 +18,15 @@ from numpy.typing import NDArray
 
 from ...calibration import Calibration
 from ...errors import InputError
-from ...frames import DepthFrame, FramePair, Match, ThermalFrame, pair_of
+from ...frames import DepthFrame, FfcState, FramePair, Match, ThermalFrame, pair_of
 from .format import (
     FORMAT,
+    THERMAL_META,
     VERSION,
     CorruptFrameError,
     RecordingWarning,
     checksum,
+    is_url,
     short_error,
     telemetry_from_row,
 )
@@ -120,7 +122,8 @@ def _negative_rows(rows: NDArray[Any]) -> NDArray[np.bool_]:
 
 
 class Recording:
-    """A recording opened for reading.
+    """A recording opened for reading: a local path, or an fsspec URL (``file://``,
+    ``s3://`` with s3fs installed, ...) that zarr opens through its fsspec store.
 
     Counts are those of the frames fully written (found from the commit markers, so a killed
     recording opens with every completed frame); the meta and pair tables are read once, in
@@ -131,8 +134,9 @@ class Recording:
     """
 
     def __init__(self, path: str | Path, warn: Callable[[str], None] | None = None) -> None:
-        self.path = Path(path)
-        if not self.path.exists():
+        url = is_url(path)
+        self.path: str | Path = str(path) if url else Path(path)
+        if not url and not Path(path).exists():
             raise InputError(f"{self.path}: no such recording")
         try:
             self.root = zarr.open_group(str(self.path), mode="r", zarr_format=3)
@@ -311,10 +315,12 @@ class Recording:
         frame: ThermalFrame = self._one("thermal", row)
         return frame
 
-    def _readable(self, rows: Iterable[Any], what: str, read: Callable[..., Any]) -> Iterator[Any]:
-        """``read(*row)`` for each row; unreadable ones skipped and counted: one warning line
-        per run of consecutive rows skipped for the same cause (none for a table chunk
-        warned about on open)."""
+    def _readable(
+        self, rows: Iterable[Any], what: str, read: Callable[..., Any], first: int = 0
+    ) -> Iterator[Any]:
+        """``read(*row)`` for each row (numbered from ``first`` in the warnings); unreadable
+        ones skipped and counted: one warning line per run of consecutive rows skipped for the
+        same cause (none for a table chunk warned about on open)."""
         run: list[Any] = []  # [first, last, cause, first message] of the skips not yet told
 
         def tell() -> None:
@@ -326,7 +332,7 @@ class Recording:
                 run.clear()
 
         try:
-            for i, row in enumerate(rows):
+            for i, row in enumerate(rows, first):
                 try:
                     item = read(*row)
                 except CorruptFrameError as exc:
@@ -344,11 +350,12 @@ class Recording:
         finally:  # also when the reader stops early
             tell()
 
-    def matches(self) -> Iterator[Match]:
-        """Every recorded pair with its frames, in order; unreadable ones skipped and
-        counted (one warning line each, or one per table chunk warned about on open). The
-        pairs are read :data:`READ_AHEAD` at a time by a thread, a batch ahead of the one
-        being used, so decoding overlaps the caller's work."""
+    def matches(self, start: int = 0, stop: int | None = None) -> Iterator[Match]:
+        """The recorded pairs ``start`` to ``stop`` (rows of the pairs table; default: all)
+        with their frames, in order; unreadable ones skipped and counted (one warning line
+        each, or one per table chunk warned about on open). The pairs are read
+        :data:`READ_AHEAD` at a time by a thread, a batch ahead of the one being used, so
+        decoding overlaps the caller's work."""
 
         def read_batch(batch: list[tuple[int, ...]]) -> list[Any]:
             depth = self._frames_at("depth", [int(r[1]) for r in batch])
@@ -365,8 +372,10 @@ class Recording:
                     out.append(exc)
             return out
 
-        rows = [(i, *row) for i, row in enumerate(self._pairs.rows.tolist())]
-        yield from self._readable(((m,) for m in _read_ahead(rows, read_batch)), "pair", _given)
+        table = self._pairs.rows[start:stop].tolist()
+        rows = [(i, *row) for i, row in enumerate(table, start)]
+        found = ((m,) for m in _read_ahead(rows, read_batch))
+        yield from self._readable(found, "pair", _given, start)
 
     def frames(self) -> Iterator[DepthFrame | ThermalFrame]:
         """Every recorded depth and thermal frame, in time order (what a recording of one
@@ -383,10 +392,20 @@ class Recording:
             key=lambda f: f.time_s,
         )
 
-    def pairs(self) -> Iterator[FramePair]:
-        """The recorded FramePairs, bit for bit (see :meth:`matches`)."""
-        for m in self.matches():
+    def pairs(self, start: int = 0, stop: int | None = None) -> Iterator[FramePair]:
+        """The recorded FramePairs ``start`` to ``stop``, bit for bit (see :meth:`matches`)."""
+        for m in self.matches(start, stop):
             yield m.pair
+
+    def pair_in_ffc(self) -> NDArray[np.bool_]:
+        """Per row of the pairs table: True where the pair's thermal frame was taken with the
+        shutter closed (its telemetry's FFC state; a pipeline measures nothing there). From
+        the tables read on open: no image is read."""
+        rows, thermal = self._pairs.rows, self._thermal.rows
+        if not len(rows) or not len(thermal):
+            return np.zeros(len(rows), dtype=bool)
+        state = thermal[np.clip(rows[:, 1], 0, len(thermal) - 1), THERMAL_META.index("ffc_state")]
+        return np.asarray(state == FfcState.IN_PROGRESS)
 
 
 READ_AHEAD = 8
