@@ -13,6 +13,7 @@ BENCHMARKS = [
     "bench_recording",
     "bench_replay",
     "bench_codecs",
+    "bench_batch",
     "bench_detection",
 ]
 

@@ -11,6 +11,8 @@ module                 use cases
 =====================  ======================================================================
 :mod:`.run`            ``run`` (fuse a stream into measurements, with the sinks it asks for)
 :mod:`.record`         ``record`` (a source into a crash-safe recording)
+:mod:`.batch`          ``batch`` (many recordings measured again on a dask cluster; its
+                       summary in :mod:`.batch_summary`)
 :mod:`.calibrate`      ``calibrate``, ``calibrate_camera``, ``check_calibration``
 :mod:`.capture`        ``capture_board`` (the pairs of a stream worth calibrating with)
 :mod:`.collect`        ``collect_sweep`` (sweep rows from a session in front of a plate)
