@@ -60,6 +60,7 @@ def rig_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.fixture(scope="module")
 def cluster() -> LocalCluster:
+    saved = dict(os.environ)  # the nannies set their workers' variables in ours
     with LocalCluster(
         n_workers=2,
         threads_per_worker=1,
@@ -68,6 +69,8 @@ def cluster() -> LocalCluster:
         silence_logs=50,
     ) as c:
         yield c
+    os.environ.clear()
+    os.environ.update(saved)
 
 
 def same_as_run(d: Path, out: Path, name: str) -> None:
@@ -101,12 +104,14 @@ def test_outputs_are_those_of_run_byte_for_byte(rig_files: dict[str, Path], tmp_
             return cm()
 
     said: list[str] = []
+    environ = dict(os.environ)
     result = batch(
         options(rig_files, tmp_path / "out", workers=2, range_pairs=7),
         Recorder(),
         None,
         said.append,
     )
+    assert dict(os.environ) == environ  # the workers' variables stay theirs
     for name in ("a", "b"):
         same_as_run(d, tmp_path / "out", name)
     assert sorted(result.measured) == ["a", "b"] and result.pairs == 65 and not result.failed

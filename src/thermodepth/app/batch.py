@@ -23,11 +23,12 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 
 from ..calibration import Calibration
@@ -101,6 +102,7 @@ class PipelineSpec:
     settings: Settings
     calibration: Calibration | None
     model: CompensationModel | None
+    threads: int | None = None  # numba's threads in a task (None: the worker's default)
 
     def pipeline(self, calibration: Calibration | None) -> Pipeline:
         """A pipeline for a recording holding ``calibration`` (None: the settings')."""
@@ -148,6 +150,8 @@ def measure_range(spec: PipelineSpec, task: RangeTask) -> RangeResult:
             result.warnings.append(message)
 
     tell = _progress_sender(task)
+    if spec.threads is not None:  # per thread: the task's own
+        numba.set_num_threads(min(spec.threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
     try:
         rec = Recording(task.url, warn)
         pipe = spec.pipeline(rec.calibration)
@@ -273,6 +277,9 @@ def batch(
         except ThermodepthError as exc:
             fail(name, str(exc))
     if jobs:
+        if options.scheduler is None:  # a local cluster's workers share the cores
+            cores = os.cpu_count() or 1
+            spec = replace(spec, threads=max(1, cores // (options.workers or cores)))
         with _client(options) as client:
             result.dashboard = client.dashboard_link
             if say is not None:
@@ -383,12 +390,9 @@ def _client(options: BatchOptions) -> Iterator[Any]:
         with Client(options.scheduler, timeout=10) as client:
             yield client
         return
-    cores = os.cpu_count() or 1
-    n = options.workers or cores
     config = {f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENV.items()}
-    config["distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS"] = str(max(1, cores // n))
-    with dask.config.set(config), LocalCluster(
-        n_workers=n,
+    with _environ_kept(), dask.config.set(config), LocalCluster(
+        n_workers=options.workers or os.cpu_count() or 1,
         threads_per_worker=1,
         processes=True,
         host="127.0.0.1",
@@ -396,6 +400,19 @@ def _client(options: BatchOptions) -> Iterator[Any]:
         silence_logs=40,  # logging.ERROR: the workers' own lines stay out of the command's
     ) as cluster, Client(cluster) as client:  # fmt: skip
         yield client
+
+
+@contextmanager
+def _environ_kept() -> Iterator[None]:
+    """Give this process's environment back as it was: dask's nannies set the workers'
+    variables (OMP_NUM_THREADS, MALLOC_*) in it before spawning them, and leave them there
+    for every process this one starts later."""
+    saved = dict(os.environ)
+    try:
+        yield
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
 
 
 def _probe(address: str, timeout_s: float = 5.0) -> None:
