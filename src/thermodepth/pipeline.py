@@ -170,8 +170,42 @@ class AlarmSettings(StrictSchema):
     what: str = "hotspot"
 
 
+class ViewerSettings(StrictSchema):
+    """The live viewer (``run --viewer``; docs/pipeline.md): at most ``max_hz`` frames a
+    second logged (the others only counted), at most ``max_points`` points of each cloud
+    (evenly strided), temperatures coloured on the fixed scale ``temp_range_c`` (C)."""
+
+    max_hz: float = Field(default=5.0, gt=0)
+    max_points: int = Field(default=60_000, ge=1000)
+    temp_range_c: tuple[TempC, TempC] = (15.0, 80.0)
+
+    @model_validator(mode="after")
+    def _range(self) -> ViewerSettings:
+        lo, hi = self.temp_range_c
+        if not lo < hi:
+            raise ValueError(f"temp_range_c {[lo, hi]}: expected low < high (C)")
+        return self
+
+
+class MqttSettings(StrictSchema):
+    """Publishing to an MQTT broker (``run --mqtt URL``; docs/pipeline.md): a measurement
+    summary at most ``measurements_hz`` times a second; alarms queued while the broker is
+    away, up to ``max_queued`` (then the oldest are dropped, counted and told);
+    ``password_file``: a file holding the password (else the environment's
+    THERMODEPTH_MQTT_PASSWORD); ``ca_file``: the CA of an ``mqtts://`` broker (None: the
+    system's); ``client_id``: None for one made from the host and process."""
+
+    measurements_hz: float = Field(default=1.0, gt=0)
+    max_queued: int = Field(default=10_000, ge=1)
+    password_file: Path | None = None
+    ca_file: Path | None = None
+    client_id: str | None = None
+    connect_timeout_s: float = Field(default=5.0, gt=0)
+
+
 class Settings(StrictSchema):
-    """Everything the pipeline needs, from one YAML file (paths relative to it)."""
+    """Everything the pipeline needs, from one YAML file (paths relative to it); the
+    ``viewer`` and ``mqtt`` sections are those of the run's sinks."""
 
     calibration: Path | None = None
     compensation: Path | None = None
@@ -181,6 +215,8 @@ class Settings(StrictSchema):
     rois: list[RoiSettings] = Field(default_factory=list)
     alarms: list[AlarmSettings] = Field(default_factory=list)
     fallback_distance_m: float | None = Field(default=None, gt=0, le=MAX_DISTANCE_M)
+    viewer: ViewerSettings = ViewerSettings()
+    mqtt: MqttSettings = MqttSettings()
     _path: Path | None = PrivateAttr(default=None)  # the file it was loaded from
 
     @property
@@ -194,10 +230,17 @@ class Settings(StrictSchema):
         p = Path(path)
         s = load_validated(cls, p)
         base = p.parent
+        mqtt = s.mqtt.model_copy(
+            update={
+                name: None if getattr(s.mqtt, name) is None else base / getattr(s.mqtt, name)
+                for name in ("password_file", "ca_file")
+            }
+        )
         s = s.model_copy(
             update={
                 "calibration": None if s.calibration is None else base / s.calibration,
                 "compensation": None if s.compensation is None else base / s.compensation,
+                "mqtt": mqtt,
             }
         )
         s._path = p

@@ -13,7 +13,8 @@ from ..calibration import Calibration
 from ..errors import FieldError, check_count
 from ..pipeline import Pipeline, Settings
 from ..session import RunResult, run_session
-from ..sinks import MeasurementsSink, RecorderSink, Sink
+from ..sinks import MeasurementsSink, MqttSink, RecorderSink, Sink
+from ..sinks.mqtt import MqttTarget
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
 
 Warn = Callable[[str], None]
@@ -29,7 +30,8 @@ class RunOptions:
     frames: stop after so many pairs (None: at the source's end); out_dir: write the
     measurements there; record: also record everything into this new recording;
     max_skew_s: the pairing threshold (s); thermal_latency_s: subtracted from the Lepton's
-    arrival times (s).
+    arrival times (s); mqtt: publish alarms, measurements and status to this broker
+    (``mqtt://[USER@]HOST[:PORT]/PREFIX``; the settings' ``mqtt`` section says how).
     """
 
     source: str = "sim"
@@ -39,11 +41,14 @@ class RunOptions:
     record: Path | None = None
     max_skew_s: float = DEFAULT_MAX_SKEW_S
     thermal_latency_s: float = 0.0
+    mqtt: str | None = None
 
     def check(self) -> None:
         """One FieldError for an option that cannot be."""
         check_count("frames", self.frames)
         check_timing(self.max_skew_s, self.thermal_latency_s)
+        if self.mqtt is not None:
+            MqttTarget.parse(self.mqtt)
 
 
 def check_timing(max_skew_s: float, thermal_latency_s: float) -> None:
@@ -81,11 +86,15 @@ def open_pairs(
     return src
 
 
-SINK_BUILDERS: list[Callable[[RunOptions], Sink | None]] = [
-    lambda o: MeasurementsSink(o.out_dir) if o.out_dir is not None else None,
-    lambda o: RecorderSink(o.record) if o.record is not None else None,
+SinkBuilder = Callable[[RunOptions, Settings, Warn], Sink | None]
+
+SINK_BUILDERS: list[SinkBuilder] = [
+    lambda o, s, w: MeasurementsSink(o.out_dir) if o.out_dir is not None else None,
+    lambda o, s, w: RecorderSink(o.record) if o.record is not None else None,
+    lambda o, s, w: MqttSink(o.mqtt, s.mqtt, w) if o.mqtt is not None else None,
 ]
-"""The sinks a run's options ask for, one builder each (None: not asked for)."""
+"""The sinks a run's options ask for, one builder each (None: not asked for), from the
+options, the settings and where warnings go."""
 
 
 def provenance(settings_path: Path | None, settings: Settings) -> dict[str, Any]:
@@ -110,7 +119,8 @@ def run(options: RunOptions, sinks: Sequence[Sink] = (), warn: Warn | None = Non
     options.check()
     settings = Settings.load(options.settings) if options.settings else Settings()
     cal = Calibration.load(settings.calibration) if settings.calibration else None
-    outputs = [s for build in SINK_BUILDERS if (s := build(options)) is not None]
+    say = warn or (lambda message: None)
+    outputs = [s for build in SINK_BUILDERS if (s := build(options, settings, say)) is not None]
     all_sinks = [*outputs, *sinks]
     for sink in all_sinks:
         sink.check()

@@ -143,13 +143,29 @@ def run_cmd(
     max_skew_ms: MaxSkewMs = 20.0,
     thermal_latency_ms: ThermalLatencyMs = 0.0,
     quiet: Annotated[bool, typer.Option("--quiet", help="No line per frame.")] = False,
+    mqtt: Annotated[
+        str | None,
+        typer.Option(
+            metavar="mqtt://[USER@]HOST[:PORT]/PREFIX",
+            help="Publish alarms, measurements and status to this MQTT broker (mqtts:// for "
+            "TLS); the password from THERMODEPTH_MQTT_PASSWORD or the settings' "
+            "mqtt.password_file.",
+        ),
+    ] = None,
 ) -> None:
     """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
     from ..app.run import RunOptions, run
     from ..sinks import CallbackSink
 
     options = RunOptions(
-        source, settings, frames, out, record, max_skew_ms / 1000.0, thermal_latency_ms / 1000.0
+        source,
+        settings,
+        frames,
+        out,
+        record,
+        max_skew_ms / 1000.0,
+        thermal_latency_ms / 1000.0,
+        mqtt=mqtt,
     )
     result = run(options, [] if quiet else [CallbackSink(print_frame)], warn_line)
     console.print(
