@@ -113,7 +113,8 @@ def test_example_settings_hold_every_section() -> None:
     settings = Settings.load(path)
     raw = yaml.safe_load(path.read_text())
     assert {"calibration", "compensation", "radiometry", "registration", "hotspots", "rois",
-            "alarms"} <= set(raw)  # fmt: skip
+            "alarms", "viewer", "mqtt"} <= set(raw)  # fmt: skip
+    assert settings.viewer.temp_range_c == (15.0, 80.0) and settings.mqtt.max_queued == 10_000
     assert settings.compensation == path.parent / "model.json"
     shapes = {next(k for k in ("rect", "polygon", "depth_range_m") if k in r) for r in raw["rois"]}
     assert shapes == {"rect", "polygon", "depth_range_m"}

@@ -6,9 +6,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .compensation import CompensationModel, apply_to_table, by_vox
-from .plotting import pyplot, save_figure
+from .plotting import distinct_styles, pyplot, save_figure
+from .registration import Reason
 from .sweep import SweepTable
 
 if TYPE_CHECKING:
@@ -63,10 +65,9 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
         bins = by_vox(values, table)  # means per 1 C of VOx
         for ax, r in zip(axes[0], refs, strict=True):
             dists = sorted(d for (rr, d) in bins if rr == r)
-            colors = plt.cm.viridis(np.linspace(0, 0.9, len(dists)))
-            for d, color in zip(dists, colors, strict=True):
+            for d, (color, marker) in zip(dists, distinct_styles(len(dists)), strict=True):
                 x, y = np.array(list(bins[(float(r), d)].items())).T
-                ax.plot(x, y, "o", ms=3, color=color, label=f"{d:g} m")
+                ax.plot(x, y, marker, ms=4, color=color, label=f"{d:g} m", ls="none")
                 if with_curves:  # the model's prediction of the uncompensated reading
                     xs = np.linspace(x.min(), x.max(), 100)
                     ax.plot(xs, model.predict_measured(r, xs, d), "-", color=color, lw=1)
@@ -80,6 +81,28 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
     return paths
 
 
+MIN_BOX_PX = 16
+"""The smallest hotspot box drawn on an overlay (pixels a side): a far hotspot stays visible."""
+
+NO_TEMPERATURE = (
+    (Reason.INVALID_DEPTH, "no depth", (0.05, 0.05, 0.35)),
+    (Reason.OUTSIDE, "outside the thermal view", (0.55, 0.55, 0.55)),
+    (Reason.OCCLUDED, "hidden from the thermal camera", (0.55, 0.1, 0.55)),
+)
+"""Why a depth pixel has no temperature, and how an overlay tints it (RGB 0-1)."""
+
+
+def display_range_c(temp_c: NDArray[np.floating]) -> tuple[float, float]:
+    """A colour scale for a run or a report, from one frame's temperatures (C): its 1st
+    percentile to its maximum, widened to multiples of 5 C (15-80 C where there is none)."""
+    t = np.asarray(temp_c)
+    if not np.isfinite(t).any():
+        return 15.0, 80.0
+    lo = 5.0 * np.floor(float(np.nanpercentile(t, 1)) / 5.0)
+    hi = 5.0 * np.ceil(float(np.nanmax(t)) / 5.0)
+    return lo, max(hi, lo + 5.0)
+
+
 def plot_overlay(
     frame: FusedFrame,
     path: str | Path,
@@ -88,15 +111,19 @@ def plot_overlay(
     vmax_c: float | None = None,
 ) -> Path:
     """The fused temperature (colour map) over the depth camera's IR image (or a shaded
-    depth map), hotspot boxes labelled in C, metres and cm^2, and a colour bar."""
-    from matplotlib.patches import Rectangle
+    depth map), the pixels without a temperature tinted by why (legend), hotspot boxes
+    (at least :data:`MIN_BOX_PX` a side) labelled in C, metres and cm^2 where the label does
+    not cover the box, and a colour bar. ``vmin_c``/``vmax_c``: the colour scale (C); give
+    them for every image of a run or a report (:func:`display_range_c`), so that a colour
+    means one temperature throughout; None: this frame's own (:func:`display_range_c`)."""
+    from matplotlib.patches import Patch, Rectangle
 
     from .measure import hotspot_box_on_depth
 
     plt = pyplot()
     cal = frame.calibration
     h, w = cal.depth.shape
-    fig, ax = plt.subplots(figsize=(w / 100 + 1.6, h / 100 + 0.6), dpi=100)
+    fig, ax = plt.subplots(figsize=(w / 100 + 1.6, h / 100 + 0.9), dpi=100)
     if frame.ir is not None:
         ax.imshow(frame.ir, cmap="gray", vmin=0, vmax=255)
     else:  # near is light, far is dark
@@ -105,12 +132,14 @@ def plot_overlay(
         ax.imshow(
             np.nan_to_num((hi - z) / max(hi - lo, 1e-6), nan=0.0), cmap="gray", vmin=0, vmax=1
         )
+    tint = np.zeros((h, w, 4))
+    for reason, _, rgb in NO_TEMPERATURE:
+        tint[frame.reason_depth == reason] = (*rgb, 0.55)
+    ax.imshow(tint)
     t = frame.temp_depth_c
-    finite = np.isfinite(t)
-    lo_c = (
-        vmin_c if vmin_c is not None else (float(np.nanpercentile(t, 1)) if finite.any() else 0.0)
-    )
-    hi_c = vmax_c if vmax_c is not None else (float(np.nanmax(t)) if finite.any() else 1.0)
+    auto_lo, auto_hi = display_range_c(t)
+    lo_c = auto_lo if vmin_c is None else vmin_c
+    hi_c = auto_hi if vmax_c is None else vmax_c
     im = ax.imshow(np.ma.masked_invalid(t), cmap="inferno", vmin=lo_c, vmax=hi_c, alpha=0.7)
     for hs in frame.hotspots:
         box = hotspot_box_on_depth(
@@ -118,25 +147,44 @@ def plot_overlay(
         )
         if box is None:
             continue
-        u0, v0, u1, v1 = box
+        u0, v0, u1, v1 = _at_least(box, MIN_BOX_PX, w, h)
         color = "cyan" if hs.resolvable else "yellow"
         ax.add_patch(Rectangle((u0, v0), u1 - u0, v1 - v0, fill=False, ec=color, lw=1.5))
         label = f"{hs.max_c:.1f} C  {hs.distance_m:.2f} m  {hs.area_m2 * 1e4:.1f} cm$^2$" + (
             "" if hs.resolvable else "  (too small: reads low)"
         )
+        above = v0 - 4 > 24  # room above the box: the label never covers what it names
         ax.text(
             u0,
-            max(v0 - 6, 10),
+            v0 - 4 if above else v1 + 4,
             label,
             color=color,
             fontsize=9,
-            va="bottom",
+            va="bottom" if above else "top",
             bbox={"facecolor": "black", "alpha": 0.5, "pad": 1, "lw": 0},
         )
     fig.colorbar(im, ax=ax, fraction=0.03, pad=0.01, label="temperature (C)")
+    handles = [Patch(facecolor=(*rgb, 0.55), label=text) for _, text, rgb in NO_TEMPERATURE]
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.01), ncol=3,
+              fontsize=8, frameon=False, title="no temperature:", title_fontsize=8)  # fmt: skip
     ax.set_title(title or f"frame {frame.index}: VOx {frame.vox_temp_c:.2f} C", fontsize=10)
     ax.set_axis_off()
     return save_figure(fig, path)
+
+
+def _at_least(
+    box: tuple[int, int, int, int], side: int, w: int, h: int
+) -> tuple[float, float, float, float]:
+    """A box (u0, v0, u1, v1) grown about its centre to ``side`` pixels where smaller."""
+    u0, v0, u1, v1 = box
+    cu, cv = (u0 + u1) / 2, (v0 + v1) / 2
+    half_u, half_v = max((u1 - u0) / 2, side / 2), max((v1 - v0) / 2, side / 2)
+    return (
+        max(cu - half_u, 0),
+        max(cv - half_v, 0),
+        min(cu + half_u, w - 1),
+        min(cv + half_v, h - 1),
+    )
 
 
 def plot_target(

@@ -43,7 +43,12 @@ from ..evaluation import (
     registration_difference_px,
     registration_error_table,
 )
-from ..figures import plot_overlay, plot_registration_error, plot_vox_curves
+from ..figures import (
+    display_range_c,
+    plot_overlay,
+    plot_registration_error,
+    plot_vox_curves,
+)
 from ..io.measurements import jsonable
 from ..io.pointcloud import write_ply
 from ..io.report import Report
@@ -340,6 +345,7 @@ def _inspection(
     registration = Registration(cal)  # shared by every pipeline below
     rows: list[list[Any]] = []
     results = []
+    scale_c: tuple[float, float] | None = None  # one colour scale for every overlay
     for i, d in enumerate(config.inspection_m):
         vox = vox_cycle[i % len(vox_cycle)]
         scene = plate_scene(chip_temp_c=70.0)
@@ -394,10 +400,12 @@ def _inspection(
                     }
                 )
                 if d in (0.5, 2.25, 1.0):
+                    scale_c = scale_c or display_range_c(last.temp_depth_c)
                     plot_overlay(
                         last,
                         out / f"overlay_{d:g}m.png",
                         f"{d:g} m, VOx {vox:g} C, compensated (ours)",
+                        *scale_c,
                     )
                 if d == 1.0 or (config.quick and d == 0.75):
                     pts, temps = last.points()

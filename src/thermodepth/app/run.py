@@ -15,6 +15,8 @@ from ..pipeline import Pipeline, Settings
 from ..session import RunResult, run_session
 from ..sinks import MeasurementsSink, MqttSink, RecorderSink, Sink
 from ..sinks.mqtt import MqttTarget
+from ..sinks.snapshots import SnapshotSink
+from ..sinks.viewer import check_viewer_options, viewer_sink
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
 
 Warn = Callable[[str], None]
@@ -31,7 +33,10 @@ class RunOptions:
     measurements there; record: also record everything into this new recording;
     max_skew_s: the pairing threshold (s); thermal_latency_s: subtracted from the Lepton's
     arrival times (s); mqtt: publish alarms, measurements and status to this broker
-    (``mqtt://[USER@]HOST[:PORT]/PREFIX``; the settings' ``mqtt`` section says how).
+    (``mqtt://[USER@]HOST[:PORT]/PREFIX``; the settings' ``mqtt`` section says how);
+    viewer / viewer_save / viewer_connect: show the run in rerun (a viewer spawned, an
+    ``.rrd`` file, a running viewer's address; the settings' ``viewer`` section says how);
+    snapshots: with out_dir, an overlay PNG and a PLY every so many frames and at every alarm.
     """
 
     source: str = "sim"
@@ -42,13 +47,21 @@ class RunOptions:
     max_skew_s: float = DEFAULT_MAX_SKEW_S
     thermal_latency_s: float = 0.0
     mqtt: str | None = None
+    viewer: bool = False
+    viewer_save: Path | None = None
+    viewer_connect: str | None = None
+    snapshots: int | None = None
 
     def check(self) -> None:
         """One FieldError for an option that cannot be."""
         check_count("frames", self.frames)
+        check_count("snapshots", self.snapshots)
         check_timing(self.max_skew_s, self.thermal_latency_s)
         if self.mqtt is not None:
             MqttTarget.parse(self.mqtt)
+        check_viewer_options(self.viewer, self.viewer_save, self.viewer_connect)
+        if self.snapshots is not None and self.out_dir is None:
+            raise FieldError("snapshots", "snapshots go into the measurements folder: give --out")
 
 
 def check_timing(max_skew_s: float, thermal_latency_s: float) -> None:
@@ -92,9 +105,21 @@ SINK_BUILDERS: list[SinkBuilder] = [
     lambda o, s, w: MeasurementsSink(o.out_dir) if o.out_dir is not None else None,
     lambda o, s, w: RecorderSink(o.record) if o.record is not None else None,
     lambda o, s, w: MqttSink(o.mqtt, s.mqtt, w) if o.mqtt is not None else None,
+    lambda o, s, w: viewer_sink(o.viewer, o.viewer_save, o.viewer_connect, s.viewer, w),
+    lambda o, s, w: (
+        SnapshotSink(o.out_dir, o.snapshots, display_range(s))
+        if o.snapshots is not None and o.out_dir is not None
+        else None
+    ),
 ]
 """The sinks a run's options ask for, one builder each (None: not asked for), from the
 options, the settings and where warnings go."""
+
+
+def display_range(settings: Settings) -> tuple[float, float] | None:
+    """The colour scale the settings fix (``viewer.temp_range_c``, C), None if they do not."""
+    given = "temp_range_c" in settings.viewer.model_fields_set
+    return settings.viewer.temp_range_c if given else None
 
 
 def provenance(settings_path: Path | None, settings: Settings) -> dict[str, Any]:

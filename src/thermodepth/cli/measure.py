@@ -118,6 +118,20 @@ def print_source_stats(result: SessionResult) -> None:
         console.print(f"source: {counts}", soft_wrap=True, highlight=False)
 
 
+ViewerSave = Annotated[
+    Path | None,
+    typer.Option("--viewer-save", help="Write the rerun view to this .rrd file instead."),
+]
+ViewerConnect = Annotated[
+    str | None,
+    typer.Option(
+        "--viewer-connect",
+        metavar="ADDR",
+        help="Stream the view to a running rerun viewer (rerun+http://HOST:9876/proxy).",
+    ),
+]
+
+
 @app.command("run")
 @one_line_errors
 def run_cmd(
@@ -152,6 +166,18 @@ def run_cmd(
             "mqtt.password_file.",
         ),
     ] = None,
+    viewer: Annotated[
+        bool, typer.Option("--viewer", help="Show the run live in 3D in a rerun viewer.")
+    ] = False,
+    viewer_save: ViewerSave = None,
+    viewer_connect: ViewerConnect = None,
+    snapshots: Annotated[
+        int | None,
+        typer.Option(
+            metavar="N",
+            help="With --out: an overlay PNG and a PLY every N frames and at every alarm.",
+        ),
+    ] = None,
 ) -> None:
     """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
     from ..app.run import RunOptions, run
@@ -166,6 +192,10 @@ def run_cmd(
         max_skew_ms / 1000.0,
         thermal_latency_ms / 1000.0,
         mqtt=mqtt,
+        viewer=viewer,
+        viewer_save=viewer_save,
+        viewer_connect=viewer_connect,
+        snapshots=snapshots,
     )
     result = run(options, [] if quiet else [CallbackSink(print_frame)], warn_line)
     console.print(
@@ -176,6 +206,34 @@ def run_cmd(
     for line in result.outputs:
         console.print(line, soft_wrap=True, highlight=False)
     print_source_stats(result)
+    if result.error:
+        raise ThermodepthError(result.error)
+
+
+@app.command("view")
+@one_line_errors
+def view_cmd(
+    recording: Annotated[Path, typer.Argument(help="A recording (.zarr) to replay.")],
+    settings: Annotated[
+        Path | None, typer.Option(help="Settings YAML (calibration, compensation, rules).")
+    ] = None,
+    save: ViewerSave = None,
+    connect: ViewerConnect = None,
+) -> None:
+    """Replay a recording through the pipeline into the rerun viewer (spawned, unless it is
+    saved to a file or sent to a running viewer)."""
+    from ..app.run import RunOptions, run
+
+    options = RunOptions(
+        f"recording:{recording}",
+        settings,
+        viewer=save is None and connect is None,
+        viewer_save=save,
+        viewer_connect=connect,
+    )
+    result = run(options, [], warn_line)
+    for line in result.outputs:
+        console.print(line, soft_wrap=True, highlight=False)
     if result.error:
         raise ThermodepthError(result.error)
 

@@ -1,0 +1,55 @@
+"""Pictures from a run: every ``every`` fused frames, and at every alarm, an overlay PNG and
+a PLY point cloud in ``<out>/snapshots/`` (``frame_000120.png``, ``frame_000120.ply``),
+all on one colour scale (the settings' ``viewer.temp_range_c`` if given, else fixed from the
+first frame with temperatures)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..figures import display_range_c, plot_overlay
+from ..io.pointcloud import write_ply
+from ..pipeline import FusedFrame
+from .base import BaseSink
+
+
+class SnapshotSink(BaseSink):
+    """Writes the snapshots of a run into ``out_dir/snapshots`` (see the module docstring);
+    ``range_c``: the colour scale (C), None: from the first frame with temperatures."""
+
+    def __init__(
+        self, out_dir: str | Path, every: int, range_c: tuple[float, float] | None = None
+    ) -> None:
+        self.folder = Path(out_dir) / "snapshots"
+        self.every = every
+        self.range_c = range_c
+        self.written = 0
+        self.at_alarms = 0
+        self._seen = 0
+
+    def frame(self, fused: FusedFrame) -> None:
+        self._seen += 1
+        alarm = any(e["event"] == "alarm" for e in fused.events)
+        if fused.in_ffc or not (alarm or (self._seen - 1) % self.every == 0):
+            return
+        if self.range_c is None:
+            self.range_c = display_range_c(fused.temp_depth_c)
+        lo, hi = self.range_c
+        stem = self.folder / f"frame_{fused.index:06d}"
+        rule = ", ".join(e["rule"] for e in fused.events if e["event"] == "alarm")
+        title = f"frame {fused.index}, t {fused.thermal_time_s:.2f} s, VOx {fused.vox_temp_c:.2f} C"
+        plot_overlay(
+            fused, stem.with_suffix(".png"), title + (f": ALARM {rule}" if rule else ""), lo, hi
+        )
+        points, temps = fused.points()
+        write_ply(stem.with_suffix(".ply"), points, temps, lo, hi)
+        self.written += 1
+        self.at_alarms += alarm
+
+    def summary(self) -> str:
+        return (
+            f"wrote {self.written} snapshots ({self.at_alarms} at alarms; overlay PNG and PLY, "
+            f"{self.range_c[0]:g}-{self.range_c[1]:g} C) to {self.folder}"
+            if self.range_c
+            else f"no snapshot written to {self.folder}"
+        )
