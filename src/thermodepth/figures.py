@@ -61,22 +61,38 @@ def plot_vox_curves(model: CompensationModel, table: SweepTable, out_dir: str | 
         ("fig13_uncompensated.png", table["measured_temp_c"], "uncompensated (Fig. 13)", True),
         ("fig14_compensated.png", compensated, f"compensated, {model.method} (Fig. 14)", False),
     ):
-        fig, axes = plt.subplots(1, refs.size, figsize=(5.2 * refs.size, 4.0), squeeze=False)
+        fig, axes = plt.subplots(
+            2,
+            refs.size,
+            figsize=(5.2 * refs.size, 6.0),
+            squeeze=False,
+            sharex="col",
+            gridspec_kw={"height_ratios": [3, 2]},
+        )
         bins = by_vox(values, table)  # means per 1 C of VOx
-        for ax, r in zip(axes[0], refs, strict=True):
+        for col, r in enumerate(refs):
+            ax, low = axes[0, col], axes[1, col]
             dists = sorted(d for (rr, d) in bins if rr == r)
+            nearest = bins[(float(r), dists[0])]
             for d, (color, marker) in zip(dists, distinct_styles(len(dists)), strict=True):
                 x, y = np.array(list(bins[(float(r), d)].items())).T
                 ax.plot(x, y, marker, ms=4, color=color, label=f"{d:g} m", ls="none")
                 if with_curves:  # the model's prediction of the uncompensated reading
                     xs = np.linspace(x.min(), x.max(), 100)
                     ax.plot(xs, model.predict_measured(r, xs, d), "-", color=color, lw=1)
+                # the distances told apart: each minus the nearest distance, VOx bin by bin
+                both = [v for v in x if v in nearest]
+                diff = [bins[(float(r), d)][v] - nearest[v] for v in both]
+                low.plot(both, diff, marker + "-", ms=4, lw=0.8, color=color, label=f"{d:g} m")
             ax.axhline(r, color="k", lw=0.8, ls=":")
-            ax.set_xlabel("VOx (sensor) temperature (C)")
             ax.set_ylabel("reading (C)")
             ax.set_title(f"{r:g} C target, {title}", fontsize=10)
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7, ncol=2)
+            low.axhline(0, color="k", lw=0.8, ls=":")
+            low.set_xlabel("VOx (sensor) temperature (C)")
+            low.set_ylabel(f"minus the {dists[0]:g} m reading (C)")
+            low.grid(alpha=0.3)
         paths.append(save_figure(fig, Path(out_dir) / name))
     return paths
 
