@@ -19,6 +19,7 @@ pytest.importorskip("distributed", reason="batch needs the distributed extra (da
 from distributed import Client, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from chip_settings import HOT_CHIP, chip_settings
 from thermodepth.app.batch import (
     BatchOptions,
     PipelineSpec,
@@ -35,22 +36,11 @@ from thermodepth.session import record_session
 from thermodepth.sim import Rig, camera_pose, plate_scene
 from thermodepth.sources.sim import SimSource
 
-# the simulated chip reads 67.42-67.59 C: an alarm above 67.48 C for 3 frames trips and
-# clears several times in 40 frames, so ranges of 7 pairs cut through its counts
-SETTINGS = """\
-hotspots:
-  threshold_c: 50
-alarms:
-  - name: hot
-    above_c: 67.48
-    for_frames: 3
-"""
-
 
 @pytest.fixture(scope="module")
 def rig_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("batch")
-    (d / "s.yaml").write_text(SETTINGS, encoding="utf-8")
+    chip_settings(d, for_frames=3)  # ranges of 7 pairs cut through its counts
     for name, n in (("a", 40), ("b", 25)):
         rig = Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0), seed=len(name) + n)
         record_session(SimSource(rig), d / f"{name}.zarr", frames=n)
@@ -253,7 +243,7 @@ def test_resume_skips_complete_and_redoes_partial(
         same_as_run(rig_files["dir"], out, name)
     # other settings: their results are not this batch's
     other = tmp_path / "other.yaml"
-    other.write_text(SETTINGS.replace("67.48", "67.5"), encoding="utf-8")
+    other.write_text(HOT_CHIP.format(for_frames=3).replace("67.48", "67.5"), encoding="utf-8")
     changed = BatchOptions(first.recordings, out, other, resume=True)
     with pytest.raises(FieldError, match="holds results of other settings"):
         batch(changed)

@@ -14,6 +14,7 @@ import pytest
 
 pytest.importorskip("paho.mqtt.client", reason="--mqtt needs the mqtt extra (paho-mqtt)")
 
+from chip_settings import chip_settings
 from mqtt_broker import Broker, Collector, missing
 from thermodepth.app.run import RunOptions, run
 from thermodepth.errors import FieldError, InputError
@@ -22,23 +23,13 @@ from thermodepth.sinks.mqtt import PASSWORD_ENV, MqttTarget
 
 needs_broker = pytest.mark.skipif(missing() is not None, reason=missing() or "")
 
-# the simulated chip reads 67.42-67.59 C: above 67.48 C it trips and clears every few frames
-SETTINGS = """\
-hotspots:
-  threshold_c: 50
-alarms:
-  - name: hot
-    above_c: 67.48
-mqtt:
-  measurements_hz: 1000
-"""
+
+MQTT = "mqtt:\n  measurements_hz: 1000\n"
 
 
 @pytest.fixture()
 def settings(tmp_path: Path) -> Path:
-    path = tmp_path / "s.yaml"
-    path.write_text(SETTINGS, encoding="utf-8")
-    return path
+    return chip_settings(tmp_path, MQTT)
 
 
 @pytest.fixture()
@@ -164,8 +155,7 @@ def test_last_will_says_the_run_died(broker: Broker, settings: Path, tmp_path: P
 @needs_broker
 def test_password_file_from_the_settings(broker: Broker, tmp_path: Path) -> None:
     (tmp_path / "pw").write_text(broker.password + "\n", encoding="utf-8")
-    path = tmp_path / "s.yaml"
-    path.write_text(SETTINGS + "  password_file: pw\n", encoding="utf-8")
+    path = chip_settings(tmp_path, MQTT + "  password_file: pw\n")
     result = run(RunOptions("sim", path, 2, mqtt=broker.url()))
     assert any(line.startswith("MQTT mqtt://127.0.0.1") for line in result.outputs)
 

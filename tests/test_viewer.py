@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from chip_settings import chip_settings
 from thermodepth.app.run import RunOptions, run
 from thermodepth.cli import app
 from thermodepth.errors import FieldError, ThermodepthError
@@ -20,12 +21,7 @@ from thermodepth.plotting import distinct_styles
 from thermodepth.sim import Rig, camera_pose, plate_scene
 from thermodepth.sinks.viewer import INSTALL, ViewerSink, colour_scale
 
-SETTINGS = """\
-hotspots:
-  threshold_c: 50
-alarms:
-  - name: hot
-    above_c: 67.48
+EXTRA = """\
 rois:
   - name: panel
     rect: [400, 200, 880, 520]
@@ -36,9 +32,7 @@ viewer:
 
 @pytest.fixture()
 def settings(tmp_path: Path) -> Path:
-    path = tmp_path / "s.yaml"
-    path.write_text(SETTINGS, encoding="utf-8")
-    return path
+    return chip_settings(tmp_path, EXTRA)
 
 
 WANTED = (
