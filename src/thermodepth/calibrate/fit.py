@@ -220,6 +220,34 @@ def flag_outliers(errors_px: FloatArray) -> NDArray[np.bool_]:
     return out
 
 
+def fit_warnings(
+    coverage: NDArray[np.int64],
+    image: str,
+    used: Sequence[str],
+    outliers: NDArray[np.bool_],
+    fewest: int,
+    views: tuple[str, str, str],
+) -> tuple[str, ...]:
+    """What the user should know of a fit: the board covering under half of ``image`` (the
+    cells of ``coverage`` it reached), fewer than ``fewest`` images used (``used``: their
+    names), the ``outliers`` among them. ``views``: what the images are called in the
+    advice (used, moved, and how many fit better: ``("pairs", "poses", "15-25")``)."""
+    counted, moved, better = views
+    warn = []
+    cov = float(np.mean(coverage > 0))
+    if cov < 0.5:
+        warn.append(
+            f"the board covered {cov:.0%} of {image}: add {moved} near its edges and "
+            "corners, or distortion is extrapolated there"
+        )
+    if len(used) < fewest:
+        warn.append(f"only {len(used)} {counted} used: {better} well-spread {moved} fit better")
+    if outliers.any():
+        names = ", ".join(name for name, f in zip(used, outliers, strict=True) if f)
+        warn.append(f"outlier images: {names} (--drop-outliers fits without them)")
+    return tuple(warn)
+
+
 def per_view_errors_px(depth: CameraFit, thermal: CameraFit, stereo: StereoFit) -> FloatArray:
     """Per-image RMS reprojection errors (n, 4), pixels: each camera's own fit, then the
     stereo fit's depth and thermal sides (the columns the outlier rule judges)."""

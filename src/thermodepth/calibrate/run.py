@@ -29,6 +29,7 @@ from .fit import (
     calibrate_camera,
     camera_report,
     coverage_grid,
+    fit_warnings,
     fixed_camera_fit,
     flag_outliers,
     outlier_limits_px,
@@ -91,19 +92,9 @@ class CalibrationResult:
     @cached_property
     def warnings(self) -> tuple[str, ...]:
         """What the user should know: poor thermal coverage, few pairs, outlier images."""
-        warn = []
-        cov = float(np.mean(self.thermal_coverage > 0))
-        if cov < 0.5:
-            warn.append(
-                f"the board covered {cov:.0%} of the thermal image: add poses near its edges "
-                "and corners, or distortion is extrapolated there"
-            )
-        if len(self.used) < 10:
-            warn.append(f"only {len(self.used)} pairs used: 15-25 well-spread poses fit better")
-        if self.outliers.any():
-            names = ", ".join(p.name for p, f in zip(self.used, self.outliers, strict=True) if f)
-            warn.append(f"outlier images: {names} (--drop-outliers fits without them)")
-        return tuple(warn)
+        cov, views = self.thermal_coverage, ("pairs", "poses", "15-25")
+        names = [p.name for p in self.used]
+        return fit_warnings(cov, "the thermal image", names, self.outliers, 10, views)
 
     def per_image(self) -> list[dict[str, Any]]:
         """Per used pair: name, depth / thermal RMS (own fits), stereo RMS per camera,

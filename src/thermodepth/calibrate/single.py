@@ -31,6 +31,7 @@ from .fit import (
     calibrate_camera,
     camera_report,
     coverage_grid,
+    fit_warnings,
     flag_outliers,
     outlier_limits_px,
 )
@@ -104,19 +105,9 @@ class CameraResult:
     @cached_property
     def warnings(self) -> tuple[str, ...]:
         """What the user should know: poor coverage, few views, outlier images."""
-        warn = []
-        cov = float(np.mean(self.coverage > 0))
-        if cov < 0.5:
-            warn.append(
-                f"the board covered {cov:.0%} of the image: add views near its edges and "
-                "corners, or distortion is extrapolated there"
-            )
-        if len(self.used) < 15:
-            warn.append(f"only {len(self.used)} views used: 20-50 well-spread views fit better")
-        if self.outliers.any():
-            names = ", ".join(p.name for p, f in zip(self.used, self.outliers, strict=True) if f)
-            warn.append(f"outlier images: {names} (--drop-outliers fits without them)")
-        return tuple(warn)
+        views = ("views", "views", "20-50")
+        names = [p.name for p in self.used]
+        return fit_warnings(self.coverage, "the image", names, self.outliers, 15, views)
 
     def report_dict(self) -> dict[str, Any]:
         """All figures of the report, JSON-ready (``calib_report.json``)."""
