@@ -13,6 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 from plyfile import PlyData, PlyElement
 
+from ..plotting import temperature_rgb
+
 
 def write_ply(
     path: str | Path,
@@ -27,8 +29,6 @@ def write_ply(
 
     vmin_c / vmax_c: the colour map's range (default: 1st and 99th percentile).
     """
-    from matplotlib import colormaps
-
     pts = np.asarray(points_m, np.float32).reshape(-1, 3)
     t = np.asarray(temp_c, np.float32).ravel()
     if len(pts) != len(t):
@@ -37,8 +37,7 @@ def write_ply(
         vmin_c = float(np.nanpercentile(t, 1)) if t.size else 0.0
     if vmax_c is None:
         vmax_c = float(np.nanpercentile(t, 99)) if t.size else 1.0
-    scaled = np.clip((t - vmin_c) / max(vmax_c - vmin_c, 1e-6), 0, 1)
-    rgb = (colormaps[colormap](np.nan_to_num(scaled))[:, :3] * 255).round().astype(np.uint8)
+    rgb = temperature_rgb(t, (vmin_c, vmax_c), colormap)
     vertex = np.empty(
         len(pts),
         dtype=[

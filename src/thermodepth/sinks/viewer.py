@@ -37,6 +37,7 @@ from ..errors import FieldError, ThermodepthError
 from ..frames import Match, StreamEvent
 from ..measure import PolygonRoi, RectRoi
 from ..pipeline import FusedFrame, ViewerSettings
+from ..plotting import temperature_rgb
 from ..registration import Reason
 from .base import BaseSink, RunContext, SessionResult
 
@@ -48,11 +49,7 @@ COLORMAP = "inferno"
 def colour_scale(temp_c: NDArray[np.floating], range_c: tuple[float, float]) -> NDArray[np.uint8]:
     """RGB (..., 3) uint8 of temperatures (C) on the fixed scale ``range_c`` (inferno,
     clipped at both ends), grey where there is none (NaN)."""
-    from matplotlib import colormaps
-
-    lo, hi = range_c
-    x = np.clip((np.asarray(temp_c, np.float64) - lo) / (hi - lo), 0.0, 1.0)
-    rgb = (colormaps[COLORMAP](np.nan_to_num(x))[..., :3] * 255).astype(np.uint8)
+    rgb = temperature_rgb(temp_c, range_c, COLORMAP)
     rgb[~np.isfinite(temp_c)] = GREY
     return rgb
 
