@@ -279,6 +279,11 @@ def test_refused_before_any_task(rig_files: dict[str, Path], tmp_path: Path) -> 
     ]:
         with pytest.raises((FieldError, InputError), match=message):
             batch(opts)
+    torn = tmp_path / "torn"
+    torn.mkdir()
+    (torn / "batch.json").write_text("{ not json", encoding="utf-8")
+    with pytest.raises(FieldError, match=r"torn/batch\.json is unreadable \(JSONDecodeError: "):
+        batch(options(rig_files, torn, resume=True))
     bad = tmp_path / "bad.yaml"
     bad.write_text("alarms:\n  - name: hot\n    above_c: hot\n", encoding="utf-8")
     bad_opts = options(rig_files, tmp_path / "z")

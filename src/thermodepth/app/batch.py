@@ -341,8 +341,12 @@ def prepare_output(options: BatchOptions, ident: dict[str, Any]) -> Path:
             "out_dir", f"{out} holds other files ({entries[0]}, ...): not a batch's results"
         )
     if entries:
-        earlier = json.loads(manifest.read_text(encoding="utf-8"))
-        same = earlier.get("settings_sha256") == ident["settings_sha256"]
+        try:
+            earlier = json.loads(manifest.read_text(encoding="utf-8"))
+            same = earlier.get("settings_sha256") == ident["settings_sha256"]
+        except (OSError, ValueError, AttributeError) as exc:
+            why = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+            raise FieldError("out_dir", f"{manifest} is unreadable ({why})") from None
         if options.resume and not same:
             raise FieldError(
                 "out_dir",
