@@ -25,6 +25,7 @@ from thermodepth.pipeline import (
     Pipeline,
     PixelFlag,
     RadiometrySettings,
+    RegistrationSettings,
     RoiSettings,
     Settings,
 )
@@ -171,19 +172,30 @@ def test_vox_outside_the_model_is_flagged_on_measurements(model_path: Path) -> N
     assert frame.rois[1].n == 0 and frame.rois[1].flags == 0
 
 
-def test_roi_statistics_are_those_of_the_whole_mask() -> None:
-    # fixed ROIs gather from their bounding box: the same pixels as the full-image mask
+@pytest.mark.parametrize(
+    ("method", "interpolation"),
+    [("reproject", "nearest"), ("reproject", "bilinear"), ("paper", "nearest")],
+)
+def test_roi_statistics_are_those_of_the_whole_mask(method: str, interpolation: str) -> None:
+    # ROIs summed row by row while the registration samples (the paper's method: in a pass
+    # of their own) equal numpy over the full-image mask, bit for bit
     rig = inspection_rig(1.0)
     rois = [
         RoiSettings(name="rect", rect=(500, 250, 780, 470)),
         RoiSettings(name="poly", polygon=[(520, 260), (760, 300), (600, 460)]),
         RoiSettings(name="range", depth_range_m=(0.5, 1.5)),
     ]
-    pipe = Pipeline(Settings(rois=rois), rig.calibration)
+    registration = RegistrationSettings(method=method, interpolation=interpolation)
+    pipe = Pipeline(Settings(rois=rois, registration=registration), rig.calibration)
     frame = pipe.process(rig.frame())
     shape = rig.calibration.depth.shape
-    flags, index = frame.flags_thermal.ravel(), frame.thermal_index_depth
-    assert index is not None
+    # the thermal pixel each depth pixel sees, from the registration's own map
+    index = np.empty(shape, np.int32)
+    near = pipe.registration.depth_to_thermal(frame.depth)
+    pipe.registration.thermal_to_depth(
+        frame.depth, frame.temp_thermal_c, interpolation, nearest=near, thermal_index=index
+    )
+    flags = frame.flags_thermal.ravel()
     for got, roi in zip(frame.rois, pipe.rois, strict=True):
         mask = roi.mask(shape, frame.depth_m)
         seen = index[mask]

@@ -20,12 +20,13 @@ from functools import lru_cache
 from typing import Any
 
 import cv2
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from .camera import Intrinsics, RigidTransform, corner_rays, pixel_rays
 from .radiometry import celsius_to_kelvin, stefan_boltzmann_power_w
+from .registration.kernels import FIXED_POINT, VALUE_LIMIT
+from .registration.regions import Moments, Region, exact_sum
 
 FloatArray = NDArray[np.floating]
 BoolArray = NDArray[np.bool_]
@@ -110,59 +111,19 @@ class RoiStats:
     sd_c: float
     flags: int = 0
 
-
-FIXED_POINT = 2**12
-"""Temperatures are summed as whole multiples of 2^-12 C (0.00024 C, far below any camera's
-noise), rounded: integer sums are exact, so an ROI's statistics do not depend on the order
-its pixels are visited in (rows, threads, vector lanes), and a box scan equals a whole-image
-mask bit for bit."""
-
-_T_LIMIT_C = 8191.0  # temperatures clipped to +-8191 C: q^2 over a row fits int64
-_NO_MIN, _NO_MAX = np.int32(2**31 - 1), np.int32(-(2**31))
-
-
-@dataclass(frozen=True)
-class RoiMoments:
-    """Exact sums over an ROI's valid pixels: n, the sums of q and of q^2 (ints), with q the
-    temperature in units of 2^-12 C (:data:`FIXED_POINT`); the extremes (C) and the OR of
-    the flags."""
-
-    n: int
-    sum_q: int
-    sum_q2: int
-    min_c: float
-    max_c: float
-    flags: int
-
-    def stats(self, name: str) -> RoiStats:
-        """Mean, max, min and SD (of the population, as numpy's std) in C."""
-        if self.n == 0:
-            nan = float("nan")
-            return RoiStats(name, 0, nan, nan, nan, nan, self.flags)
-        n, s = self.n, self.sum_q
-        spread = n * self.sum_q2 - s * s  # exact: n^2 times the variance, in q units
-        return RoiStats(
-            name,
-            n,
-            s / n / FIXED_POINT,
-            self.max_c,
-            self.min_c,
-            float(np.sqrt(spread / (n * n))) / FIXED_POINT,
-            self.flags,
-        )
+    @classmethod
+    def of(cls, name: str, moments: Moments) -> RoiStats:
+        """The statistics of an ROI's exact sums (of temperatures in C)."""
+        m = moments
+        return cls(name, m.n, m.mean, m.max, m.min, m.sd, m.flags)
 
 
 def _fixed(values: NDArray[np.floating]) -> NDArray[np.int64]:
-    """Temperatures (C) as whole multiples of 2^-12 C, as the pipeline's kernel computes them:
-    float32, clipped to +-8191 C, scaled (exactly: a power of two) and rounded half up."""
-    t = np.clip(values.astype(np.float32), -_T_LIMIT_C, _T_LIMIT_C)
+    """Temperatures (C) as whole multiples of 2^-12 C, as the registration's kernel sums them
+    (:data:`~thermodepth.registration.kernels.FIXED_POINT`): float32, clipped to +-8191 C,
+    scaled (exactly: a power of two) and rounded half up."""
+    t = np.clip(values.astype(np.float32), -VALUE_LIMIT, VALUE_LIMIT)
     return np.floor(t * np.float32(FIXED_POINT) + np.float32(0.5)).astype(np.int64)
-
-
-def _exact_sum(values: NDArray[np.int64]) -> int:
-    """The sum of up to 2^21 int64 values as an exact int (their total may not fit int64):
-    the high and low 32 bits summed apart."""
-    return (int((values >> 32).sum()) << 32) + int((values & 0xFFFFFFFF).sum())
 
 
 def roi_stats(
@@ -170,158 +131,44 @@ def roi_stats(
 ) -> RoiStats:
     """Mean, max, min and SD of finite ``temp_c`` inside ``mask`` (same shape); ``flags``
     (any shape): those of the pixels the ROI draws on, OR-ed into its flag. The sums are
-    exact (:data:`FIXED_POINT`): the pipeline's :func:`scan_roi` gives the same figures."""
+    exact (whole multiples of 2^-12 C, 0.00024 C, far below any camera's noise): the
+    pipeline's, taken while it samples (:mod:`thermodepth.registration.regions`), are the
+    same figures."""
     values = temp_c[mask]
     values = values[np.isfinite(values)]
     flag = int(np.bitwise_or.reduce(flags, axis=None, initial=0)) if flags is not None else 0
     if values.size == 0:
-        return RoiMoments(0, 0, 0, np.nan, np.nan, flag).stats(name)
+        return RoiStats.of(name, Moments(0, 0, 0, np.nan, np.nan, flag))
     q = _fixed(values)
-    return RoiMoments(
+    moments = Moments(
         int(values.size),
         int(q.sum()),
-        _exact_sum(q * q),
+        int(exact_sum(q * q)),
         float(values.min()),
         float(values.max()),
         flag,
-    ).stats(name)
-
-
-@dataclass(frozen=True, eq=False)
-class RoiScan:
-    """Where an ROI's pixels are on the depth grid, as :func:`scan_roi` visits them: the rows
-    and columns of its box, a uint8 mask of the box (one row of ones: all of it) and the raw
-    depth values it takes (inclusive; from 1 up: a depth range, whose rows are read only
-    where their depth is in it)."""
-
-    rows: slice
-    cols: slice
-    mask: NDArray[np.uint8]
-    depth_units: tuple[int, int] = (0, 65535)
-
-    @classmethod
-    def of(cls, roi: Roi, shape: tuple[int, int], depth_scale_m: float) -> RoiScan:
-        """The scan of ``roi`` on a depth image of ``shape`` (H, W): a rectangle is its box,
-        a polygon its box and mask, a depth range the whole image and the raw depth values
-        whose Z (float32 metres, as :attr:`~thermodepth.pipeline.FusedFrame.depth_m`) lies
-        in it."""
-        if isinstance(roi, DepthRangeRoi):
-            units = np.arange(65536, dtype=np.uint16)
-            z = units.astype(np.float32) * np.float32(depth_scale_m)
-            inside = np.flatnonzero((units > 0) & (z >= roi.near_m) & (z <= roi.far_m))
-            span = (int(inside[0]), int(inside[-1])) if inside.size else (1, 0)
-            return cls(
-                slice(0, shape[0]), slice(0, shape[1]), np.ones((1, shape[1]), np.uint8), span
-            )
-        mask = roi.mask(shape)
-        rows, cols = bounding_box(mask)
-        if isinstance(roi, RectRoi):
-            return cls(rows, cols, np.ones((1, cols.stop - cols.start), np.uint8))
-        return cls(rows, cols, np.ascontiguousarray(mask[rows, cols], np.uint8))
-
-
-def scan_roi(
-    scan: RoiScan,
-    temp_c: NDArray[np.float32],
-    depth: NDArray[np.uint16],
-    thermal_index: NDArray[np.int32],
-    thermal_flags: NDArray[np.int32],
-) -> RoiMoments:
-    """An ROI's exact moments over a fused frame: ``temp_c`` (H, W) float32 C (NaN: none),
-    ``depth`` (H, W) raw units, ``thermal_index`` (H, W) the flat thermal pixel each depth
-    pixel sees (-1: none) and ``thermal_flags`` (h * w) int32 those pixels' flags."""
-    h = depth.shape[0]
-    sums = np.zeros((h, 4), np.int64)
-    keys = np.empty((h, 2), np.int32)  # rows outside the box: no extremes
-    keys[:, 0], keys[:, 1] = _NO_MIN, _NO_MAX
-    box = (scan.rows.start, scan.rows.stop, scan.cols.start, scan.cols.stop)
-    lo, hi = (np.uint16(x) for x in scan.depth_units)  # compared with uint16 lanes
-    gather = thermal_flags if thermal_flags.any() else thermal_flags[:0]  # none: no gathers
-    _roi_rows(
-        temp_c, temp_c.view(np.int32), depth, thermal_index, gather, box, scan.mask, lo, hi,
-        sums, keys,
-    )  # fmt: skip
-    flags = int(np.bitwise_or.reduce(sums[:, 3]))
-    n = int(sums[:, 0].sum())
-    if n == 0:
-        return RoiMoments(0, 0, 0, np.nan, np.nan, flags)
-    extremes = np.array([keys[:, 0].min(), keys[:, 1].max()], np.int32)
-    low, high = _key_flip(extremes).view(np.float32)
-    return RoiMoments(
-        n,
-        int(sums[:, 1].sum()),
-        _exact_sum(sums[:, 2]),
-        float(low),
-        float(high),
-        flags,
     )
+    return RoiStats.of(name, moments)
 
 
-def _key_flip(keys: NDArray[np.int32]) -> NDArray[np.int32]:
-    """float32 bits <-> integer keys in the floats' order (the map is its own inverse)."""
-    return keys ^ ((keys >> 31) & np.int32(0x7FFFFFFF))
-
-
-@numba.njit(parallel=True, fastmath=True, cache=True)
-def _roi_rows(
-    temp, bits, depth, index, flags, box, mask, lo, hi, sums, keys
-):  # pragma: no cover - JIT
-    # per row v of the box (v0, v1, u0, u1): the members are the pixels whose raw depth is in
-    # lo..hi and whose mask is set (mask: the box's, or one row of ones that every row uses)
-    # and that have a temperature. A depth range (lo > 0) first finds the span from the
-    # first to the last pixel in range, on the depth alone, and reads only that. Into
-    # sums[v]: n, sum q, sum q^2 and, when flags has any (flags.size > 0), the OR of the
-    # flags of the thermal pixels that the ROI's pixels see (with a temperature or not);
-    # into keys[v]: the extremes as order-preserving int32 keys of the float32 bits.
-    # Integers only: the loops vectorize, and the totals do not depend on how the pixels
-    # are split. Rows are sliced so that
-    # indices start at 0 (no wraparound checks).
-    v0, v1, u0, u1 = box
-    limit = np.float32(_T_LIMIT_C)
-    scale = np.float32(FIXED_POINT)
-    half = np.float32(0.5)
-    with_flags = flags.size > 0
-    for v in numba.prange(v0, v1):
-        drow = depth[v, u0:u1]
-        a, b = 0, drow.size
-        if lo > 0:
-            first, last = np.int32(drow.size), np.int32(-1)
-            for u in range(drow.size):
-                inside = (drow[u] >= lo) & (drow[u] <= hi)
-                first = min(first, np.int32(u) if inside else np.int32(drow.size))
-                last = max(last, np.int32(u) if inside else np.int32(-1))
-            a, b = first, max(last + 1, first)
-        mrow = mask[v - v0 if mask.shape[0] > 1 else 0, a:b]
-        d = drow[a:b]
-        t = temp[v, u0 + a : u0 + b]
-        bt = bits[v, u0 + a : u0 + b]
-        n = np.int64(0)
-        s = np.int64(0)
-        s2 = np.int64(0)
-        kmin, kmax = _NO_MIN, _NO_MAX
-        for u in range(d.size):
-            i = bt[u]
-            ok = ((i & 0x7FFFFFFF) < 0x7F800000) & (d[u] >= lo) & (d[u] <= hi) & (mrow[u] != 0)
-            x = np.floor(min(max(t[u], -limit), limit) * scale + half)
-            q = np.int64(x) if ok else np.int64(0)
-            n += np.int64(ok)
-            s += q
-            s2 += q * q
-            key = i ^ ((i >> 31) & 0x7FFFFFFF)
-            kmin = min(kmin, key if ok else _NO_MIN)
-            kmax = max(kmax, key if ok else _NO_MAX)
-        fl = np.int32(0)
-        if with_flags:  # often none: then no gathers
-            seen = index[v, u0 + a : u0 + b]
-            for u in range(d.size):  # with or without a temperature: a flag says why not
-                ok = (seen[u] >= 0) & (d[u] >= lo) & (d[u] <= hi) & (mrow[u] != 0)
-                fl |= flags[max(seen[u], 0)] if ok else np.int32(0)
-        sums[v, 0] = n
-        sums[v, 1] = s
-        sums[v, 2] = s2
-        sums[v, 3] = fl
-        keys[v, 0] = kmin
-        keys[v, 1] = kmax
+def roi_region(roi: Roi, shape: tuple[int, int], depth_scale_m: float) -> Region:
+    """Where ``roi``'s pixels are on a depth image of ``shape`` (H, W), as the registration
+    sums them: a rectangle is its box, a polygon its box and mask, a depth range the whole
+    image and the raw depth values whose Z (float32 metres, as
+    :attr:`~thermodepth.pipeline.FusedFrame.depth_m`) lies in it."""
+    if isinstance(roi, DepthRangeRoi):
+        units = np.arange(65536, dtype=np.uint16)
+        z = units.astype(np.float32) * np.float32(depth_scale_m)
+        inside = np.flatnonzero((units > 0) & (z >= roi.near_m) & (z <= roi.far_m))
+        span = (int(inside[0]), int(inside[-1])) if inside.size else (1, 0)
+        return Region(
+            slice(0, shape[0]), slice(0, shape[1]), np.ones((1, shape[1]), np.uint8), span
+        )
+    mask = roi.mask(shape)
+    rows, cols = bounding_box(mask)
+    if isinstance(roi, RectRoi):
+        return Region(rows, cols, np.ones((1, cols.stop - cols.start), np.uint8))
+    return Region(rows, cols, np.ascontiguousarray(mask[rows, cols], np.uint8))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -42,10 +42,9 @@ from .measure import (
     PolygonRoi,
     RectRoi,
     Roi,
-    RoiScan,
     RoiStats,
     find_hotspots,
-    scan_roi,
+    roi_region,
 )
 from .radiometry import (
     MAX_DISTANCE_M,
@@ -54,7 +53,14 @@ from .radiometry import (
     TEMP_LIMITS_C,
     PlanckConstants,
 )
-from .registration import INTERPOLATIONS, REGISTRATION_METHODS, Reason, Registration
+from .registration import (
+    INTERPOLATIONS,
+    REGISTRATION_METHODS,
+    Moments,
+    Reason,
+    Regions,
+    Registration,
+)
 from .schema import PlanckSchema, StrictSchema, load_validated
 
 FloatArray = NDArray[np.float32]
@@ -276,8 +282,6 @@ class FusedFrame:
     Depth grid (H, W): temp_depth_c (C, NaN where reason_depth != Reason.OK), reason_depth
     (:class:`~thermodepth.registration.Reason`), depth (the raw uint16 frame).
     Measurements: hotspots (hottest first), rois, events (alarms raised or cleared).
-    thermal_index_depth (when the settings have ROIs): the flat thermal index each depth pixel
-    sees, int32 (H, W), -1 where none.
     """
 
     index: int
@@ -297,7 +301,6 @@ class FusedFrame:
     rois: list[RoiStats] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
     ir: NDArray[np.uint8] | None = None
-    thermal_index_depth: NDArray[np.int32] | None = None
 
     @cached_property
     def depth_m(self) -> FloatArray:
@@ -376,12 +379,13 @@ class Pipeline:
             raise InputError(f"{s.compensation}: {exc.message}") from None
         self.rois = [roi.roi() for roi in s.rois]
         # where each ROI's pixels are, once: a fixed shape's box and mask, a depth range's
-        # raw depth values (measure.scan_roi reads only those each frame)
-        self._roi_scans = [
-            RoiScan.of(roi, calibration.depth.shape, calibration.depth_scale_m) for roi in self.rois
+        # raw depth values; the registration sums them while it samples each frame
+        regions = [
+            roi_region(roi, calibration.depth.shape, calibration.depth_scale_m) for roi in self.rois
         ]
-        for i, (roi, scan) in enumerate(zip(self.rois, self._roi_scans, strict=True)):
-            if not isinstance(roi, DepthRangeRoi) and scan.rows.start == scan.rows.stop:
+        self._regions = Regions(regions, calibration.depth.height)
+        for i, (roi, region) in enumerate(zip(self.rois, regions, strict=True)):
+            if not isinstance(roi, DepthRangeRoi) and region.rows.start == region.rows.stop:
                 h, w = calibration.depth.shape
                 raise InputError(
                     f"{s.where}: rois.{i}: {roi.name!r} lies outside the {w}x{h} depth image "
@@ -428,9 +432,8 @@ class Pipeline:
         if missing.any():
             # the median of every 4th pixel each way: robust, and 16x cheaper than all
             sample = distance[::4, ::4]
-            fallback = s.fallback_distance_m or (
-                float(np.nanmedian(sample)) if np.isfinite(sample).any() else 1.0
-            )
+            known = sample[np.isfinite(sample)]  # np.nanmedian's value, at a third of its cost
+            fallback = s.fallback_distance_m or (float(np.median(known)) if known.size else 1.0)
             distance = np.where(missing, np.float32(fallback), distance)
         vox_c = pair.telemetry.fpa_temp_c
         if pair.telemetry.in_ffc:
@@ -439,10 +442,10 @@ class Pipeline:
         else:
             temp, flags = self.temperatures(pair.thermal, vox_c, distance)
         flags |= np.where(missing, np.uint8(PixelFlag.NO_DISTANCE), np.uint8(0))
-        # with ROIs, which thermal pixel each depth pixel sees: their flags follow it
-        index = np.empty(pair.depth.shape, np.int32) if self.rois else None
+        # the ROIs' sums, taken while the registration samples (none in the shutter's image)
+        sums = self._regions.row_sums(flags) if self.rois and not pair.telemetry.in_ffc else None
         temp_depth, reason = self.registration.thermal_to_depth(
-            pair.depth, temp, s.registration.interpolation, nearest=near, thermal_index=index
+            pair.depth, temp, s.registration.interpolation, nearest=near, regions=sums
         )
         frame = FusedFrame(
             pair.index,
@@ -459,14 +462,14 @@ class Pipeline:
             pair.depth,
             self.calibration,
             ir=pair.ir,
-            thermal_index_depth=index,
         )
         if not frame.in_ffc:  # measurements never use the shutter's image
-            self.measure(frame)
+            self.measure(frame, Regions.moments(sums) if sums is not None else [])
         return frame
 
-    def measure(self, frame: FusedFrame) -> None:
-        """Fill in the frame's hotspots, ROI statistics and alarm events."""
+    def measure(self, frame: FusedFrame, roi_moments: list[Moments]) -> None:
+        """Fill in the frame's hotspots, ROI statistics (from their sums, in the order of
+        the settings' ROIs) and alarm events."""
         s = self.settings
         cal = self.calibration
         frame.hotspots = find_hotspots(
@@ -480,15 +483,9 @@ class Pipeline:
             frame.flags_thermal,
             s.hotspots.min_thermal_px,
         )
-        frame.rois = []
-        if self.rois:
-            index = frame.thermal_index_depth
-            assert index is not None, "the registration gives it when there are ROIs"
-            flags = frame.flags_thermal.ravel().astype(np.int32)
-            frame.rois = [
-                scan_roi(scan, frame.temp_depth_c, frame.depth, index, flags).stats(roi.name)
-                for roi, scan in zip(self.rois, self._roi_scans, strict=True)
-            ]
+        frame.rois = [
+            RoiStats.of(roi.name, m) for roi, m in zip(self.rois, roi_moments, strict=True)
+        ]
         frame.events = self.alarms.update(
             frame.thermal_time_s, frame.index, frame.hotspots, frame.rois
         )

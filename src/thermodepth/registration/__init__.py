@@ -39,6 +39,7 @@ from .base import (
     describe,
 )
 from .paper import PaperMethod
+from .regions import Moments, Region, Regions, RowSums
 from .reproject import ReprojectMethod
 
 REGISTRATION_METHODS: dict[str, Callable[[Calibration, RegistrationOptions], RegistrationMethod]]
@@ -76,6 +77,7 @@ class Registration:
             tolerance or OcclusionTolerance(), paper_reference_m, chunks
         )
         self.strategy = REGISTRATION_METHODS[method](calibration, self.options)
+        self._no_regions = Regions([], calibration.depth.height).row_sums()
 
     @classmethod
     def from_file(
@@ -127,6 +129,7 @@ class Registration:
         interpolation: str = "nearest",
         nearest: DepthOnThermal | None = None,
         thermal_index: NDArray[np.int32] | None = None,
+        regions: RowSums | None = None,
     ) -> ThermalOnDepth:
         """The thermal value seen at every depth pixel.
 
@@ -137,8 +140,10 @@ class Registration:
         then not computed again. thermal_index: an int32 (H, W) array to fill with the flat
         index (v * w + u) of the thermal pixel each depth pixel sees (the nearest one), -1
         where ``reason != Reason.OK``, so other thermal-grid data (flags) can follow without
-        a second pass. Returns float32 (H, W) values, NaN where ``reason != Reason.OK``
-        (invalid depth, outside the thermal image, occluded).
+        a second pass. regions: :meth:`Regions.row_sums` of this depth grid, to fill with
+        each region's sums of the values, row by row (:meth:`Regions.moments` totals them).
+        Returns float32 (H, W) values, NaN where ``reason != Reason.OK`` (invalid depth,
+        outside the thermal image, occluded).
         """
         depth = self._check_depth(depth)
         therm = self._check_thermal(thermal)
@@ -155,7 +160,16 @@ class Registration:
                 f"thermal_index must be a C-contiguous int32 array of shape {depth.shape}, "
                 f"got {describe(thermal_index)}"
             )
-        return self.strategy.thermal_to_depth(depth, therm, interpolation, nearest, thermal_index)
+        if regions is None:
+            regions = self._no_regions
+        elif regions.sums.shape[1:] != (4, depth.shape[0]):
+            raise ValueError(
+                f"regions must be the row sums of a depth grid of {depth.shape[0]} rows, "
+                f"got sums of shape {regions.sums.shape}"
+            )
+        return self.strategy.thermal_to_depth(
+            depth, therm, interpolation, nearest, thermal_index, regions
+        )
 
     def thermal_pixel_of_depth(
         self, depth: NDArray[np.uint16]
@@ -170,10 +184,14 @@ __all__ = [
     "INTERPOLATIONS",
     "REGISTRATION_METHODS",
     "DepthOnThermal",
+    "Moments",
     "OcclusionTolerance",
     "Reason",
+    "Region",
+    "Regions",
     "Registration",
     "RegistrationMethod",
     "RegistrationOptions",
+    "RowSums",
     "ThermalOnDepth",
 ]

@@ -5,12 +5,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import ClassVar, NamedTuple, Protocol
+from typing import TYPE_CHECKING, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
+
+if TYPE_CHECKING:  # the kernels import Reason from here
+    from .kernels import RowSums
 
 FloatArray = NDArray[np.float32]
 
@@ -78,7 +81,8 @@ class RegistrationOptions:
 class RegistrationMethod(Protocol):
     """A registration method for one calibration (``REGISTRATION_METHODS``). Inputs arrive
     checked (:class:`~thermodepth.registration.Registration` checks them): depth (H, W)
-    uint16, thermal (h, w) float32 C-contiguous, thermal_index None or (H, W) int32."""
+    uint16, thermal (h, w) float32 C-contiguous, thermal_index None or (H, W) int32, regions
+    the :class:`~.kernels.RowSums` to fill (none: zero regions)."""
 
     name: ClassVar[str]
 
@@ -93,8 +97,10 @@ class RegistrationMethod(Protocol):
         interpolation: str,
         nearest: DepthOnThermal | None,
         thermal_index: NDArray[np.int32] | None,
+        regions: RowSums,
     ) -> ThermalOnDepth:
-        """The thermal value each depth pixel sees, with the reason where none."""
+        """The thermal value each depth pixel sees, with the reason where none; each
+        region's sums of those values, row by row, into ``regions``."""
         ...
 
     def thermal_pixel_of_depth(

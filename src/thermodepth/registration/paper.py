@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..camera import distort, pixel_rays
 from .base import DepthOnThermal, FloatArray, Reason, RegistrationOptions, ThermalOnDepth
+from .kernels import RowSums, scan_regions
 
 
 class PaperMethod:
@@ -54,8 +55,10 @@ class PaperMethod:
         interpolation: str,
         nearest: DepthOnThermal | None,
         thermal_index: NDArray[np.int32] | None,
+        regions: RowSums,
     ) -> ThermalOnDepth:
-        """No occlusion test (the paper has none); ``nearest`` is not needed."""
+        """No occlusion test (the paper has none); ``nearest`` is not needed. The regions are
+        summed in a pass of their own over the sampled image."""
         flag = cv2.INTER_NEAREST if interpolation == "nearest" else cv2.INTER_LINEAR
         out = cv2.remap(
             thermal,
@@ -73,7 +76,10 @@ class PaperMethod:
         out[~ok] = np.nan
         if thermal_index is not None:
             np.copyto(thermal_index, np.where(ok, self.index, np.int32(-1)))
-        return ThermalOnDepth(np.asarray(out, dtype=np.float32), reason)
+        values: FloatArray = np.asarray(out, dtype=np.float32)
+        if regions.boxes.shape[0]:
+            scan_regions(depth, values, reason, self.index, regions)
+        return ThermalOnDepth(values, reason)
 
     def depth_to_thermal(self, depth: NDArray[np.uint16]) -> DepthOnThermal:
         """Z (and range) in the depth camera's frame of the depth pixel under each thermal

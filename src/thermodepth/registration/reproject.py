@@ -19,6 +19,7 @@ from .kernels import (
     W_SAMPLES,
     Lens,
     Rays,
+    RowSums,
     Sampled,
     Sampling,
     ViewTable,
@@ -124,6 +125,7 @@ class ReprojectMethod:
         interpolation: str,
         nearest: DepthOnThermal | None,
         thermal_index: NDArray[np.int32] | None,
+        regions: RowSums,
     ) -> ThermalOnDepth:
         if nearest is None:  # the sampling kernel builds its own z-buffer
             zbuf = np.full(thermal.size, FAR_M, dtype=np.float32)
@@ -139,11 +141,11 @@ class ReprojectMethod:
         how = self._sampling[interpolation == "bilinear"]
         values = thermal.ravel()
         args = (depth, self._scale, self._rays, self._lens, self._view, values)
-        sample(*args, zbuf, nearest is None, how, into)
+        sample(*args, zbuf, nearest is None, how, into, regions)
         if into.near.any():
             # depth nearer than the view table reaches: those pixels can land in any thermal
             # row, beyond the lag rows a chunk takes in, so build the whole z-buffer first
-            sample(*args, np.minimum(self._zbuffer(depth)[0], FAR_M), False, how, into)
+            sample(*args, np.minimum(self._zbuffer(depth)[0], FAR_M), False, how, into, regions)
         return ThermalOnDepth(into.values, into.reason)
 
     def thermal_pixel_of_depth(
