@@ -154,6 +154,11 @@ class Conditions:
         return out
 
 
+_COUNT_LIMITS = RadiometryParams()
+"""The 14-bit range of counts (what :func:`invalid_counts` reads), made once: the default
+object parameters' checks cost more than the test itself, on every frame."""
+
+
 @dataclass(frozen=True, eq=False)
 class Radiometry:
     """How a camera's counts become temperatures: its Planck constants (the RBFO model, paper
@@ -186,7 +191,7 @@ class Radiometry:
 
     def invalid(self, counts: ArrayLike) -> NDArray[np.bool_]:
         """Counts no temperature can come from (NaN, negative, above the 14-bit range)."""
-        return invalid_counts(counts, RadiometryParams(planck=self.planck))
+        return invalid_counts(counts, _COUNT_LIMITS)
 
 
 def _checked(name: str) -> AfterValidator:

@@ -271,7 +271,10 @@ def _footprints(
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (c @ n) / (rays @ n)
     q = rays * t[..., None]
-    area = 0.5 * np.linalg.norm(np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1]), axis=-1)
+    # half the cross product of the diagonals, written out: np.cross and norm cost 4x more
+    a, b = (q[:, 2] - q[:, 0]).T, (q[:, 3] - q[:, 1]).T
+    cx, cy, cz = a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+    area = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
     return np.where(np.isfinite(area) & (t > 0).all(axis=1), area, np.nan)
 
 

@@ -255,10 +255,12 @@ def atmospheric_transmission(
     2.5 m. Negative or NaN distances give NaN.
     """
     c = constants
-    sd = np.sqrt(np.where(np.asarray(distance_m, dtype=np.float64) >= 0, distance_m, np.nan))
+    with np.errstate(invalid="ignore"):  # the root of a negative distance is NaN
+        sd = np.sqrt(np.asarray(distance_m, dtype=np.float64))
     sh = np.sqrt(water_vapour(temp_k, relative_humidity))
-    return c.x * np.exp(-sd * (c.alpha1 + c.beta1 * sh)) + (1 - c.x) * np.exp(
-        -sd * (c.alpha2 + c.beta2 * sh)
+    # the coefficients negated first: with one air (scalars) each term is one pass per pixel
+    return c.x * np.exp(sd * -(c.alpha1 + c.beta1 * sh)) + (1 - c.x) * np.exp(
+        sd * -(c.alpha2 + c.beta2 * sh)
     )
 
 
@@ -289,6 +291,8 @@ class ObjectParams:
 
     def __post_init__(self) -> None:
         def outside(value: float | FloatArray, lo: float, hi: float, lo_open: bool) -> bool:
+            if isinstance(value, float | int):  # most are: numpy costs 10x more
+                return bool((value <= lo if lo_open else value < lo) or value > hi)
             v = np.asarray(value, dtype=np.float64)
             return bool(np.any(((v <= lo) if lo_open else (v < lo)) | (v > hi)))
 
