@@ -51,6 +51,25 @@ def measure(name: str, fn: Callable[[], object], n: int = 30, warmup: int = 3) -
     return Timing.of(name, times)
 
 
+def measure_extra(
+    name: str, base: Callable[[], object], fn: Callable[[], object], n: int = 300
+) -> Timing:
+    """What ``fn`` costs more than ``base``: the two called in turn ``n`` times (after a few
+    untimed calls), the difference of each turn timed; in turn, so that the machine's drift
+    falls on both alike."""
+    for _ in range(5):
+        base()
+        fn()
+    extra = np.empty(n)
+    for i in range(n):
+        t0 = time.perf_counter()
+        base()
+        t1 = time.perf_counter()
+        fn()
+        extra[i] = (time.perf_counter() - t1) - (t1 - t0)
+    return Timing.of(name, extra)
+
+
 def report(
     title: str,
     timings: list[Timing],

@@ -104,7 +104,7 @@ class RowSums(NamedTuple):
     ``boxes`` (R, 4) int64: rows v0 <= v < v1, columns u0 <= u < u1; ``units`` (R, 2)
     uint16: the raw depth values a member may have, inclusive; ``masks`` uint8, flat: each
     region's mask of its box at ``mask_at[r, 0]``, rows ``mask_at[r, 1]`` apart (0: one row
-    that every row uses); ``flags`` (h * w,) uint8: per thermal pixel, OR-ed over the
+    that every row uses); ``flags`` (h * w,) int32: per thermal pixel, OR-ed over the
     pixels each region's members see (size 0: none to gather). Out, per depth row: ``sums``
     (R, 4, H) int64: n, sum q, sum q^2 (q: the value in units of 2^-12, rounded) and the OR
     of the flags; ``keys`` (R, 2, H) int32: the least and greatest value as order-preserving
@@ -114,7 +114,7 @@ class RowSums(NamedTuple):
     units: NDArray[np.uint16]
     masks: NDArray[np.uint8]
     mask_at: NDArray[np.int64]
-    flags: NDArray[np.uint8]
+    flags: NDArray[np.int32]
     sums: NDArray[np.int64]
     keys: NDArray[np.int32]
 
@@ -381,7 +381,7 @@ def sample(
         idx = np.empty((ring, w), np.int32)
         val = np.empty(w, np.float32)
         near_z = np.empty(w, np.float32)
-        seen_flags = np.zeros(w, np.uint8)
+        seen_flags = np.zeros(w, np.int32)
         scratch = np.empty(w, np.int32)
         # the window, all rows that can meet the chunk's: each row's span and the thermal rows
         # it can land in at its depths; later[i]: the first thermal row that any row from
@@ -448,17 +448,13 @@ def sample(
                 orow, rrow = out[v, u0:u1], reason[v, u0:u1]
                 zr, ir = zt[slot], idx[slot]
                 n = u1 - u0
+                for u in range(n):
+                    j = max(ir[u], np.int32(0))
+                    val[u] = values[j]
+                    near_z[u] = zbuf[j]
                 if with_flags:
                     for u in range(n):
-                        j = max(ir[u], np.int32(0))
-                        val[u] = values[j]
-                        near_z[u] = zbuf[j]
-                        seen_flags[u] = flags[j]
-                else:
-                    for u in range(n):
-                        j = max(ir[u], np.int32(0))
-                        val[u] = values[j]
-                        near_z[u] = zbuf[j]
+                        seen_flags[u] = flags[max(ir[u], np.int32(0))]
                 for u in range(n):
                     i = ir[u]
                     pz = zr[u]
@@ -592,7 +588,7 @@ def sum_row(rs, v, u0, drow, trow, bits, rrow, frow, scratch):  # pragma: no cov
                 key = np.int32(i ^ np.int32(np.int32(i >> _SIGN) & _ABS))
                 kmin = min(kmin, key if ok else NO_MIN)
                 kmax = max(kmax, key if ok else NO_MAX)
-                fl = np.int32(fl | (np.int32(f[u]) if (np.int32(rr[u]) == zero) & member else zero))
+                fl = np.int32(fl | (f[u] if (np.int32(rr[u]) == zero) & member else zero))
             for u in range(b - a):
                 x64 = np.int64(q[u])
                 s += x64
@@ -613,7 +609,7 @@ def scan_regions(depth, values, reason, index, rs):  # pragma: no cover - JIT
     flags = rs.flags
     w = depth.shape[1]
     for v in numba.prange(depth.shape[0]):
-        seen_flags = np.zeros(w, np.uint8)
+        seen_flags = np.zeros(w, np.int32)
         if flags.size > 0:
             irow = index[v]
             for u in range(w):

@@ -103,9 +103,9 @@ class Regions:
     def row_sums(self, flags: NDArray[np.uint8] | None = None) -> RowSums:
         """Fresh sums for one frame; ``flags`` (h, w) uint8 of the thermal pixels (None or
         all zero: none gathered)."""
-        gather = np.zeros(0, np.uint8)
+        gather = np.zeros(0, np.int32)
         if flags is not None and flags.any():
-            gather = np.ascontiguousarray(flags, np.uint8).ravel()
+            gather = flags.astype(np.int32).ravel()
         return RowSums(
             self._boxes,
             self._units,
