@@ -5,15 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import TYPE_CHECKING, ClassVar, NamedTuple, Protocol
+from typing import ClassVar, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
-
-if TYPE_CHECKING:  # the kernels import Reason from here
-    from .kernels import RowSums
 
 FloatArray = NDArray[np.float32]
 
@@ -39,6 +36,28 @@ class ThermalOnDepth(NamedTuple):
 
     values: FloatArray
     reason: NDArray[np.uint8]
+
+
+class RowSums(NamedTuple):
+    """R regions of the depth grid and, per depth row, the exact sums of the valid sampled
+    values in each (filled by :func:`~.kernels.sum_row`).
+
+    ``boxes`` (R, 4) int64: rows v0 <= v < v1, columns u0 <= u < u1; ``units`` (R, 2)
+    uint16: the raw depth values a member may have, inclusive; ``masks`` uint8, flat: each
+    region's mask of its box at ``mask_at[r, 0]``, rows ``mask_at[r, 1]`` apart (0: one row
+    that every row uses); ``flags`` (h * w,) int32: per thermal pixel, OR-ed over the
+    pixels each region's members see (size 0: none to gather). Out, per depth row: ``sums``
+    (R, 4, H) int64: n, sum q, sum q^2 (q: the value in units of 2^-12, rounded) and the OR
+    of the flags; ``keys`` (R, 2, H) int32: the least and greatest value as order-preserving
+    keys of their float32 bits."""
+
+    boxes: NDArray[np.int64]
+    units: NDArray[np.uint16]
+    masks: NDArray[np.uint8]
+    mask_at: NDArray[np.int64]
+    flags: NDArray[np.int32]
+    sums: NDArray[np.int64]
+    keys: NDArray[np.int32]
 
 
 @dataclass(frozen=True)
@@ -82,7 +101,7 @@ class RegistrationMethod(Protocol):
     """A registration method for one calibration (``REGISTRATION_METHODS``). Inputs arrive
     checked (:class:`~thermodepth.registration.Registration` checks them): depth (H, W)
     uint16, thermal (h, w) float32 C-contiguous, thermal_index None or (H, W) int32, regions
-    the :class:`~.kernels.RowSums` to fill (none: zero regions)."""
+    the :class:`RowSums` to fill (none: zero regions)."""
 
     name: ClassVar[str]
 

@@ -97,28 +97,6 @@ class Sampled(NamedTuple):
     near: NDArray[np.uint8]
 
 
-class RowSums(NamedTuple):
-    """R regions of the depth grid and, per depth row, the exact sums of the valid sampled
-    values in each (filled by :func:`sum_row`).
-
-    ``boxes`` (R, 4) int64: rows v0 <= v < v1, columns u0 <= u < u1; ``units`` (R, 2)
-    uint16: the raw depth values a member may have, inclusive; ``masks`` uint8, flat: each
-    region's mask of its box at ``mask_at[r, 0]``, rows ``mask_at[r, 1]`` apart (0: one row
-    that every row uses); ``flags`` (h * w,) int32: per thermal pixel, OR-ed over the
-    pixels each region's members see (size 0: none to gather). Out, per depth row: ``sums``
-    (R, 4, H) int64: n, sum q, sum q^2 (q: the value in units of 2^-12, rounded) and the OR
-    of the flags; ``keys`` (R, 2, H) int32: the least and greatest value as order-preserving
-    keys of their float32 bits."""
-
-    boxes: NDArray[np.int64]
-    units: NDArray[np.uint16]
-    masks: NDArray[np.uint8]
-    mask_at: NDArray[np.int64]
-    flags: NDArray[np.int32]
-    sums: NDArray[np.int64]
-    keys: NDArray[np.int32]
-
-
 # Rays: the depth pixel (u, v) at depth z is the point P = R (z ray) + t = z (A_u + B_v) + t in
 # the thermal frame, with per-column A (a0, a1, a2) and per-row B (brow); for a depth camera
 # with distortion A holds a full (H, W) grid and B is zero.

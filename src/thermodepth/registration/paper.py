@@ -12,8 +12,15 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..camera import distort, pixel_rays
-from .base import DepthOnThermal, FloatArray, Reason, RegistrationOptions, ThermalOnDepth
-from .kernels import RowSums, scan_regions
+from .base import (
+    DepthOnThermal,
+    FloatArray,
+    Reason,
+    RegistrationOptions,
+    RowSums,
+    ThermalOnDepth,
+)
+from .kernels import scan_regions
 
 
 class PaperMethod:

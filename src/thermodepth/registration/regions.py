@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .kernels import FIXED_POINT, RowSums
+from .base import RowSums
+from .kernels import FIXED_POINT
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,7 +84,7 @@ def exact_sum(values: NDArray[np.int64], axis: int | None = None) -> Any:
 
 class Regions:
     """Regions packed once for the kernels; :meth:`row_sums` gives each frame the
-    :class:`~.kernels.RowSums` to fill, :meth:`moments` their totals.
+    :class:`~.base.RowSums` to fill, :meth:`moments` their totals.
 
     regions: :class:`Region` s on a depth grid of ``height`` rows.
     """

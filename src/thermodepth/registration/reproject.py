@@ -13,13 +13,12 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..camera import pixel_rays
-from .base import DepthOnThermal, FloatArray, RegistrationOptions, ThermalOnDepth
+from .base import DepthOnThermal, FloatArray, RegistrationOptions, RowSums, ThermalOnDepth
 from .kernels import (
     FAR_M,
     W_SAMPLES,
     Lens,
     Rays,
-    RowSums,
     Sampled,
     Sampling,
     ViewTable,
