@@ -7,6 +7,7 @@ import hashlib
 import json
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -170,6 +171,33 @@ def test_vox_outside_the_model_is_flagged_on_measurements(model_path: Path) -> N
     assert frame.hotspots and all(h.flags & Flag.VOX_OUTSIDE for h in frame.hotspots)
     assert frame.rois[0].flags & Flag.VOX_OUTSIDE
     assert frame.rois[1].n == 0 and frame.rois[1].flags == 0
+
+
+def test_the_depth_grid_is_sampled_once_and_only_when_asked_for() -> None:
+    rig = inspection_rig(1.0)
+    pair = rig.frame()
+    calls: list[bool] = []
+
+    class Counting(Registration):
+        def thermal_to_depth(self, *args: Any, **kwargs: Any) -> Any:
+            calls.append("regions" in kwargs)
+            return super().thermal_to_depth(*args, **kwargs)
+
+    reg = Counting(rig.calibration)
+    frame = Pipeline(Settings(), rig.calibration, registration=reg).process(pair)
+    assert calls == [] and frame.hotspots  # measured without it
+    values, reason = reg.thermal_to_depth(
+        pair.depth, frame.temp_thermal_c, nearest=reg.depth_to_thermal(pair.depth)
+    )
+    calls.clear()
+    assert np.array_equal(frame.temp_depth_c, values, equal_nan=True)
+    assert np.array_equal(frame.reason_depth, reason) and frame.points()[0].size
+    assert calls == [False]  # once, for all three
+    rois = [RoiSettings(name="all", rect=(0, 0, 1280, 720))]
+    calls.clear()
+    frame = Pipeline(Settings(rois=rois), rig.calibration, registration=reg).process(pair)
+    assert calls == [True]  # the ROIs are summed while sampling
+    assert np.array_equal(frame.temp_depth_c, values, equal_nan=True) and calls == [True]
 
 
 @pytest.mark.parametrize(

@@ -7,7 +7,9 @@ For every frame pair:
    surroundings and the air along each pixel's own range; with a compensation model, the
    sensor's VOx effect is undone too (``radiance``: on the counts; ``paper``: eq. 20 on the
    reading, at the pixel's distance);
-3. registration, thermal -> depth: temperature on the depth grid (occlusion-aware);
+3. registration, thermal -> depth: temperature on the depth grid (occlusion-aware), with
+   the ROIs' statistics summed while it samples; without ROIs, when first asked for (a run
+   that only measures hotspots and alarms never needs it);
 4. measurements: ROI statistics, hotspots in 3D, alarm rules.
 
 One :class:`Settings` object (YAML) configures it all. Thermal pixels that no depth pixel
@@ -18,10 +20,10 @@ NaN, flagged ``SHUTTER``; invalid counts give NaN flagged ``BAD_COUNTS``. The st
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from enum import IntFlag
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -60,6 +62,7 @@ from .registration import (
     Reason,
     Regions,
     Registration,
+    ThermalOnDepth,
 )
 from .schema import PlanckSchema, StrictSchema, load_validated
 
@@ -280,7 +283,8 @@ class FusedFrame:
     Thermal grid (h, w): temp_thermal_c (compensated temperature, C), flags_thermal
     (:class:`PixelFlag`), z_thermal_m / range_thermal_m (nearest surface, NaN where none).
     Depth grid (H, W): temp_depth_c (C, NaN where reason_depth != Reason.OK), reason_depth
-    (:class:`~thermodepth.registration.Reason`), depth (the raw uint16 frame).
+    (:class:`~thermodepth.registration.Reason`), both from :attr:`on_depth`, sampled by
+    ``sample_depth`` when first asked for; depth (the raw uint16 frame).
     Measurements: hotspots (hottest first), rois, events (alarms raised or cleared).
     """
 
@@ -293,14 +297,29 @@ class FusedFrame:
     flags_thermal: NDArray[np.uint8]
     z_thermal_m: FloatArray
     range_thermal_m: FloatArray
-    temp_depth_c: FloatArray
-    reason_depth: NDArray[np.uint8]
+    sample_depth: Callable[[], ThermalOnDepth] = field(repr=False)
     depth: NDArray[np.uint16]
     calibration: Calibration
     hotspots: list[Hotspot] = field(default_factory=list)
     rois: list[RoiStats] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
     ir: NDArray[np.uint8] | None = None
+
+    @cached_property
+    def on_depth(self) -> ThermalOnDepth:
+        """The temperature on the depth grid and why a pixel has none (the registration's
+        thermal -> depth of this frame), sampled once, when first asked for."""
+        return self.sample_depth()
+
+    @property
+    def temp_depth_c(self) -> FloatArray:
+        """Temperature (C) per depth pixel (H, W), NaN where reason_depth != Reason.OK."""
+        return self.on_depth.values
+
+    @property
+    def reason_depth(self) -> NDArray[np.uint8]:
+        """Why a depth pixel has no temperature (:class:`~thermodepth.registration.Reason`)."""
+        return self.on_depth.reason
 
     @cached_property
     def depth_m(self) -> FloatArray:
@@ -442,10 +461,12 @@ class Pipeline:
         else:
             temp, flags = self.temperatures(pair.thermal, vox_c, distance)
         flags |= np.where(missing, np.uint8(PixelFlag.NO_DISTANCE), np.uint8(0))
-        # the ROIs' sums, taken while the registration samples (none in the shutter's image)
-        sums = self._regions.row_sums(flags) if self.rois and not pair.telemetry.in_ffc else None
-        temp_depth, reason = self.registration.thermal_to_depth(
-            pair.depth, temp, s.registration.interpolation, nearest=near, regions=sums
+        sample_depth = partial(
+            self.registration.thermal_to_depth,
+            pair.depth,
+            temp,
+            s.registration.interpolation,
+            nearest=near,
         )
         frame = FusedFrame(
             pair.index,
@@ -457,14 +478,19 @@ class Pipeline:
             flags,
             near.z_m,
             near.range_m,
-            temp_depth,
-            reason,
+            sample_depth,
             pair.depth,
             self.calibration,
             ir=pair.ir,
         )
-        if not frame.in_ffc:  # measurements never use the shutter's image
-            self.measure(frame, Regions.moments(sums) if sums is not None else [])
+        if frame.in_ffc:  # measurements never use the shutter's image
+            return frame
+        moments = []
+        if self.rois:  # summed while the registration samples: sampled now
+            sums = self._regions.row_sums(flags)
+            frame.on_depth = sample_depth(regions=sums)
+            moments = Regions.moments(sums)
+        self.measure(frame, moments)
         return frame
 
     def measure(self, frame: FusedFrame, roi_moments: list[Moments]) -> None:
