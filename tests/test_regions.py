@@ -3,6 +3,8 @@ to numpy over a whole-image mask whatever the values, masks, depth ranges and fl
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -17,35 +19,33 @@ SHAPE = (12, 40)
 THERMAL = 6 * 8  # thermal pixels the synthetic index points into
 
 
-def scanned(
-    regions: list[Region],
-    values: np.ndarray,
-    reason: np.ndarray,
-    index: np.ndarray,
-    depth: np.ndarray,
-    flags: np.ndarray | None,
-) -> list[RoiStats]:
-    packed = Regions(regions, values.shape[0])
-    sums = packed.row_sums(flags)
-    scan_regions(depth, values, reason, index, sums)
+class Sampled(NamedTuple):
+    """A frame as the registration leaves it: values, reasons, the thermal pixel of each
+    depth pixel, and the raw depth."""
+
+    values: np.ndarray
+    reason: np.ndarray
+    index: np.ndarray
+    depth: np.ndarray
+
+
+def scanned(regions: list[Region], frame: Sampled, flags: np.ndarray | None) -> list[RoiStats]:
+    sums = Regions(regions, frame.values.shape[0]).row_sums(flags)
+    scan_regions(frame.depth, frame.values, frame.reason, frame.index, sums)
     return [RoiStats.of(str(k), m) for k, m in enumerate(Regions.moments(sums))]
 
 
 def reference(
-    rois: list[RectRoi | PolygonRoi | DepthRangeRoi],
-    values: np.ndarray,
-    reason: np.ndarray,
-    index: np.ndarray,
-    depth: np.ndarray,
-    flags: np.ndarray | None,
+    rois: list[RectRoi | PolygonRoi | DepthRangeRoi], frame: Sampled, flags: np.ndarray | None
 ) -> list[RoiStats]:
+    depth = frame.depth
     depth_m = np.where(depth > 0, depth.astype(np.float32) * np.float32(0.001), np.nan)
     out = []
     for k, roi in enumerate(rois):
-        mask = roi.mask(values.shape, depth_m)
-        seen = np.where(reason == Reason.OK, index, -1)[mask]
+        mask = roi.mask(frame.values.shape, depth_m)
+        seen = np.where(frame.reason == Reason.OK, frame.index, -1)[mask]
         drawn = flags.ravel()[seen[seen >= 0]] if flags is not None else None
-        out.append(roi_stats(str(k), values, mask, drawn))
+        out.append(roi_stats(str(k), frame.values, mask, drawn))
     return out
 
 
@@ -107,8 +107,8 @@ def test_region_sums_equal_numpy_over_the_mask(
     if rect.mask(SHAPE).any():  # the pipeline refuses a rectangle outside the image
         rois.append(rect)
     regions = [roi_region(roi, SHAPE, 0.001) for roi in rois]
-    got = scanned(regions, values, reason, index, depth, flag_map)
-    assert same(got, reference(rois, values, reason, index, depth, flag_map))
+    frame = Sampled(values, reason, index, depth)
+    assert same(scanned(regions, frame, flag_map), reference(rois, frame, flag_map))
 
 
 def test_an_empty_region_keeps_the_flags_that_say_why() -> None:
@@ -118,7 +118,7 @@ def test_an_empty_region_keeps_the_flags_that_say_why() -> None:
     depth = np.full(SHAPE, 1000, np.uint16)
     flag_map = np.full(THERMAL, 32, np.uint8)
     region = roi_region(RectRoi("r", 0, 0, 5, 5), SHAPE, 0.001)
-    (stats,) = scanned([region], values, reason, index, depth, flag_map)
+    (stats,) = scanned([region], Sampled(values, reason, index, depth), flag_map)
     assert stats.n == 0 and np.isnan(stats.mean_c) and stats.flags == 32
 
 
