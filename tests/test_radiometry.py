@@ -100,6 +100,15 @@ def test_water_vapour_and_transmission() -> None:
     assert np.isnan(atmospheric_transmission(-1.0, 25 + K0, 0.5))
 
 
+def test_transmission_is_float64_whatever_the_distance_map() -> None:
+    # the pipeline's distance maps are float32; the air is computed in float64 all the same
+    # (it once took the root in float32: 1e-9 differences in the demo's calibration figures)
+    d32 = np.linspace(0.3, 4.0, 50, dtype=np.float32)
+    tau = atmospheric_transmission(d32, 25 + K0, 0.5)
+    assert tau.dtype == np.float64
+    assert np.array_equal(tau, atmospheric_transmission(d32.astype(np.float64), 25 + K0, 0.5))
+
+
 def test_ignoring_atmosphere_biases_as_documented() -> None:
     # reference-values.md: ignoring tau biases a 35 C object by ~ -0.05 K at 0.5 m and
     # -0.10 K at 2.5 m, a 100 C object by -0.29 / -0.65 K (25 C air, RH 50 %).
