@@ -31,6 +31,7 @@ from thermodepth.app.run import RunOptions, run
 from thermodepth.cli import app
 from thermodepth.errors import FieldError, InputError
 from thermodepth.io.measurements import FILES, FrameLines
+from thermodepth.io.recording import Recording
 from thermodepth.pipeline import Pipeline, Settings
 from thermodepth.session import record_session
 from thermodepth.sim import Rig, camera_pose, plate_scene
@@ -155,6 +156,18 @@ def test_every_range_start_rebuilds_the_alarm_counts(rig_files: dict[str, Path])
         assert [f.frame for f in part.frames] == whole[start : start + 3], start
         got_alarms += [a for f in part.frames for a in f.alarms]
     assert got_alarms == alarms
+
+
+def test_tasks_of_recordings_with_one_calibration_share_its_registration(
+    rig_files: dict[str, Path],
+) -> None:
+    d = rig_files["dir"]
+    spec = PipelineSpec(Settings.load(rig_files["settings"]), None, None)
+    a, b = (Recording(d / f"{n}.zarr").calibration for n in ("a", "b"))
+    assert a is not b and a is not None and b is not None  # each opening makes its own
+    first, second = spec.pipeline(a), spec.pipeline(b)
+    assert first.registration is second.registration
+    assert first.calibration.to_dict() == a.to_dict()
 
 
 class KillOnce(WorkerPlugin):

@@ -110,9 +110,13 @@ class PipelineSpec:
         """A pipeline for a recording holding ``calibration`` (None: the settings'), with
         the registration of that calibration this process already built, if any."""
         cal = calibration or self.calibration
-        method = self.settings.registration.method
-        shared = None if cal is None else _registration(cal, method)
-        return Pipeline(self.settings, cal, registration=shared, model=self.model)
+        if cal is None:  # the settings name none either: Pipeline says so
+            return Pipeline(self.settings, model=self.model)
+        # keyed on the calibration's content: each task opens its recording, whose
+        # Calibration is a new object (they compare by identity)
+        key = json.dumps(cal.to_dict(), sort_keys=True)
+        shared = _registration(key, self.settings.registration.method)
+        return Pipeline(self.settings, shared.calibration, registration=shared, model=self.model)
 
     @property
     def alarm_memory(self) -> int:
@@ -121,10 +125,11 @@ class PipelineSpec:
 
 
 @lru_cache(maxsize=8)
-def _registration(calibration: Calibration, method: str) -> Registration:
-    """One registration per calibration and process: the tasks of one rig's recordings
-    share it (building one takes about 60 ms, 5 % of a 256-pair range's work)."""
-    return Registration(calibration, method)
+def _registration(calibration_json: str, method: str) -> Registration:
+    """One registration per calibration (its file form, as JSON) and process: the tasks of
+    one rig's recordings share it (building one takes about 60 ms, 5 % of a 256-pair range's
+    work)."""
+    return Registration(Calibration.from_dict(json.loads(calibration_json)), method)
 
 
 @dataclass(frozen=True)
