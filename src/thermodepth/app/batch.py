@@ -35,7 +35,7 @@ import numpy as np
 from ..calibration import Calibration
 from ..compensation import CompensationModel, load_model
 from ..errors import FieldError, InputError, ThermodepthError, check_count, repeated
-from ..io.measurements import FILES, HOTSPOTS_HEADER, FrameLines
+from ..io.measurements import FILES, FrameLines, MeasurementWriter
 from ..io.recording import Recording
 from ..measure import AlarmTracker
 from ..pipeline import Pipeline, Settings
@@ -529,23 +529,13 @@ def _measure(
 
 def write_recording(out: Path, name: str, ranges: list[RangeResult]) -> int:
     """Write a recording's three files from its ranges' lines, in order, into
-    ``<name>.partial/`` and rename it ``<name>/`` (a folder of that name is complete);
-    returns the frames written."""
+    ``<name>.partial/`` (made afresh by :func:`batch`) and rename it ``<name>/`` (a folder of
+    that name is complete); returns the frames written."""
     partial, final = out / f"{name}.partial", out / name
-    shutil.rmtree(partial, ignore_errors=True)
-    partial.mkdir(parents=True)
     frames = [lines for r in ranges for lines in r.frames]
-    texts = (
-        "".join(f.frame for f in frames),
-        "".join(a for f in frames for a in f.alarms),
-        HOTSPOTS_HEADER + "".join(h for f in frames for h in f.hotspots),
-    )
-    for filename, text in zip(FILES, texts, strict=True):
-        newline = "" if filename.endswith(".csv") else None  # the CSV keeps its \r\n
-        with open(partial / filename, "w", encoding="utf-8", newline=newline) as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
+    with MeasurementWriter(partial, sync=True) as writer:  # on disk before the rename
+        for lines in frames:
+            writer.write_lines(lines)
     shutil.rmtree(final, ignore_errors=True)  # --resume: a complete one is never here
     partial.rename(final)
     return len(frames)

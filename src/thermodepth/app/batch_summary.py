@@ -36,16 +36,10 @@ COLUMNS = (
 """The summary's columns; then one ``alarms:<rule>`` column per alarm rule (alarms raised)."""
 
 
-def read_frames(folder: Path) -> list[dict[str, Any]]:
-    """The frames of a recording's ``measurements.jsonl``."""
-    text = (folder / FILES[0]).read_text(encoding="utf-8")
-    return [json.loads(line) for line in text.splitlines()]
-
-
-def read_alarms(folder: Path) -> list[dict[str, Any]]:
-    """The events of a recording's ``alarms.jsonl``."""
-    text = (folder / FILES[1]).read_text(encoding="utf-8")
-    return [json.loads(line) for line in text.splitlines()]
+def read_jsonl(path: Path) -> list[dict[str, Any]]:
+    """The records of a JSON-lines file (a recording's ``measurements.jsonl``: its frames;
+    ``alarms.jsonl``: its events)."""
+    return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines()]
 
 
 def recording_row(
@@ -54,7 +48,7 @@ def recording_row(
     """The summary row of a recording measured into ``folder``: times are the thermal
     frames' (s, host clock); the hottest reading is the hottest hotspot of any frame (C, its
     centroid in the depth camera's frame, m); flags: the OR of every hotspot's and ROI's."""
-    events = read_alarms(folder)
+    events = read_jsonl(folder / FILES[1])
     raised = [e for e in events if e["event"] == "alarm"]
     times = [f["thermal_time_s"] for f in frames]
     hottest: dict[str, Any] | None = None
@@ -114,7 +108,7 @@ def write_tables(
             why = failed.get(name, "no complete results (the batch was stopped)")
             rows.append(failed_row(name, source, why, rules))
             continue
-        frames = read_frames(folder)
+        frames = read_jsonl(folder / FILES[0])
         rows.append(recording_row(name, source, folder, rules, frames))
         series[name] = [
             (f["thermal_time_s"], f["hotspots"][0]["max_c"]) for f in frames if f["hotspots"]

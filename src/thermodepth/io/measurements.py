@@ -7,6 +7,7 @@ import csv
 import io
 import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,9 +103,11 @@ class FrameLines:
 
 class MeasurementWriter:
     """Writes the measurements of fused frames into ``out_dir`` as they come; ``close()``
-    (or ``with``) flushes. Every line is complete when written."""
+    (or ``with``) flushes, and with ``sync`` also has the files on disk (fsync) before it
+    returns. Every line is complete when written."""
 
-    def __init__(self, out_dir: str | Path) -> None:
+    def __init__(self, out_dir: str | Path, sync: bool = False) -> None:
+        self.sync = sync
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         frames, alarms, hotspots = (out / name for name in FILES)
@@ -128,6 +131,9 @@ class MeasurementWriter:
 
     def close(self) -> None:
         for f in (self._frames, self._alarms, self._hotspots):
+            if self.sync:
+                f.flush()
+                os.fsync(f.fileno())
             f.close()
 
     def __enter__(self) -> MeasurementWriter:
