@@ -68,15 +68,13 @@ class Reading:
 @dataclass
 class CollectStats:
     """What a collection saw: pairs, FFC pairs skipped, pairs without the target, pairs whose
-    target moved (not read), places the target settled in, rows made and the overlays
-    written."""
+    target moved (not read), places the target settled in and the overlays written."""
 
     pairs: int = 0
     ffc_pairs: int = 0
     missing_pairs: int = 0
     moving_pairs: int = 0
     placements: int = 0
-    rows: int = 0
     overlays: list[Path] = field(default_factory=list)
 
 
@@ -143,7 +141,7 @@ class SweepCollector:
             )
         near = self.registration.depth_to_thermal(pair.depth)
         counts = pair.thermal.astype(np.float64)
-        temp = np.where(self.radiometry.invalid(counts), np.nan, self.radiometry.celsius(counts))
+        temp = self.radiometry.celsius(counts)  # NaN where the counts are invalid
         self.last_temp_c = temp
         mask = self.target.find(near.z_m, temp, self.reference_temp_c)
         distance = np.nan if mask is None else self._distance_m(pair.depth, temp, near, mask)
@@ -185,7 +183,6 @@ class SweepCollector:
         if not self._group:
             return []
         g, self._group = self._group, []
-        self.stats.rows += 1
         mean = {
             name: float(np.mean([getattr(r, name) for r in g]))
             for name in ("distance_m", "vox_temp_c", "measured_temp_c", "raw_counts", "time_s")

@@ -118,14 +118,16 @@ class TargetSpec:
             return mask if mask.sum() >= MIN_TARGET_PX else None
         if self.depth_range_m is not None:
             inside = DepthRangeRoi("target", *self.depth_range_m).mask(valid.shape, z_m) & valid
-            return _largest([c for c in _components(inside) if c.sum() >= MIN_TARGET_PX])
+            return _largest(_components(inside))
         return find_plate(z_m, temp_c, reference_temp_c)
 
 
 def _components(mask: BoolArray) -> list[BoolArray]:
-    """The 4-connected regions of ``mask``, each as a mask."""
-    n, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=4)
-    return [labels == k for k in range(1, n)]
+    """The 4-connected regions of ``mask`` of at least :data:`MIN_TARGET_PX` pixels, each as
+    a mask (the smaller ones, often hundreds in a noisy frame, get none: no target is in
+    them)."""
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=4)
+    return [labels == k for k in range(1, n) if stats[k, cv2.CC_STAT_AREA] >= MIN_TARGET_PX]
 
 
 def _largest(regions: list[BoolArray]) -> BoolArray | None:

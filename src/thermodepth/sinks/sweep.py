@@ -23,14 +23,12 @@ from .base import BaseSink, RunContext, SessionResult
 @dataclass(frozen=True)
 class SweepRequest:
     """What to collect (:class:`~thermodepth.collect.SweepCollector`): the target, its true
-    temperature (C), the conditions, readings per row, and the overlays' folder (None: the
-    CSV's)."""
+    temperature (C), the conditions and the readings per row."""
 
     target: TargetSpec
     reference_temp_c: float
     conditions: Conditions
     average: int = 1
-    overlay_dir: Path | None = None
 
 
 class SweepSink(BaseSink):
@@ -60,8 +58,7 @@ class SweepSink(BaseSink):
 
     def overlay_path(self, label: str) -> Path:
         """Where the overlay ``label`` (a number, or ``none``) goes."""
-        folder = self.request.overlay_dir or self.out.parent
-        return folder / f"{self.out.stem}_target_{label}.png"
+        return self.out.parent / f"{self.out.stem}_target_{label}.png"
 
     def open(self, context: RunContext) -> None:
         from ..figures import plot_target
