@@ -153,9 +153,11 @@ def plot_overlay(
         tint[frame.reason_depth == reason] = (*rgb, 0.55)
     ax.imshow(tint)
     t = frame.temp_depth_c
-    auto_lo, auto_hi = display_range_c(t)
-    lo_c = auto_lo if vmin_c is None else vmin_c
-    hi_c = auto_hi if vmax_c is None else vmax_c
+    lo_c, hi_c = vmin_c, vmax_c
+    if lo_c is None or hi_c is None:  # a percentile of the whole image: only when needed
+        auto_lo, auto_hi = display_range_c(t)
+        lo_c = auto_lo if lo_c is None else lo_c
+        hi_c = auto_hi if hi_c is None else hi_c
     im = ax.imshow(np.ma.masked_invalid(t), cmap="inferno", vmin=lo_c, vmax=hi_c, alpha=0.7)
     for hs in frame.hotspots:
         box = hotspot_box_on_depth(

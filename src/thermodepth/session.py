@@ -145,8 +145,7 @@ def stream_session(
                 if frames is not None and result.counted >= frames:
                     result.stopped = "frames"
                     break
-    result.outputs = [line for sink in sinks if (line := sink.summary()) is not None]
-    _pairs_seen(result, source, skews)
+    _ended(result, source, sinks, skews)
 
 
 def record_session(
@@ -223,15 +222,18 @@ def run_session(
             if frames is not None and result.frames >= frames:
                 result.stopped = "frames"
                 break
-    result.outputs = [line for sink in sinks if (line := sink.summary()) is not None]
-    _pairs_seen(result, source, skews)
+    _ended(result, source, sinks, skews)
     return result
 
 
-def _pairs_seen(result: SessionResult, source: Source, skews: list[float]) -> None:
-    """Pairing statistics for a source that does not pair in time (the simulator pairs its
-    own frames; a recording's pairs were made live): those of the pairs the session saw,
-    with who paired them."""
+def _ended(
+    result: SessionResult, source: Source, sinks: Sequence[Sink], skews: list[float]
+) -> None:
+    """What a session that ended (not by an error) tells: each sink's summary line and, for
+    a source that does not pair in time (the simulator pairs its own frames; a recording's
+    pairs were made live), the pairing statistics of the pairs the session saw, with who
+    paired them."""
+    result.outputs = [line for sink in sinks if (line := sink.summary()) is not None]
     if result.pairing is not None or not skews:
         return
     result.pairing = PairingStats(

@@ -99,7 +99,7 @@ def open_pairs(
     return src
 
 
-SinkBuilder = Callable[[RunOptions, Settings, Warn], Sink | None]
+SinkBuilder = Callable[[RunOptions, Settings, Warn | None], Sink | None]
 
 SINK_BUILDERS: list[SinkBuilder] = [
     lambda o, s, w: MeasurementsSink(o.out_dir) if o.out_dir is not None else None,
@@ -144,8 +144,7 @@ def run(options: RunOptions, sinks: Sequence[Sink] = (), warn: Warn | None = Non
     options.check()
     settings = Settings.load(options.settings) if options.settings else Settings()
     cal = Calibration.load(settings.calibration) if settings.calibration else None
-    say = warn or (lambda message: None)
-    outputs = [s for build in SINK_BUILDERS if (s := build(options, settings, say)) is not None]
+    outputs = [s for build in SINK_BUILDERS if (s := build(options, settings, warn)) is not None]
     all_sinks = [*outputs, *sinks]
     for sink in all_sinks:
         sink.check()

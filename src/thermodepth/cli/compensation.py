@@ -91,7 +91,7 @@ def collect_sweep_cmd(
     telemetry, mean reading), one sweep CSV row per --average pairs, each on disk as it is
     made (Ctrl-C keeps them): the input of fit-compensation."""
     from ..app.collect import CollectOptions, collect_sweep
-    from .measure import print_source_stats
+    from .measure import print_outputs, print_source_stats
 
     options = CollectOptions(
         source,
@@ -107,8 +107,7 @@ def collect_sweep_cmd(
         thermal_latency_ms / 1000.0,
     )
     result = collect_sweep(options, BARS, warn_line, say_line)
-    for line in result.outputs:
-        console.print(line, soft_wrap=True, highlight=False)
+    print_outputs(result)
     print_source_stats(result)
     if result.error:
         raise ThermodepthError(f"{result.error}; {out} keeps every row up to then")

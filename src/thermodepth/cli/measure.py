@@ -107,6 +107,12 @@ def record_cmd(
         raise ThermodepthError(f"{result.error}; the recording keeps every frame up to then")
 
 
+def print_outputs(result: SessionResult) -> None:
+    """What the session's sinks wrote and where, one line each."""
+    for line in result.outputs:
+        console.print(line, soft_wrap=True, highlight=False)
+
+
 def print_source_stats(result: SessionResult) -> None:
     """The pairing statistics and the source's counters of a session, one line each."""
     if result.pairing is not None:
@@ -203,8 +209,7 @@ def run_cmd(
         f"closed), {sum(e['event'] == 'alarm' for e in result.events)} alarms; "
         f"stopped: {result.stopped}"
     )
-    for line in result.outputs:
-        console.print(line, soft_wrap=True, highlight=False)
+    print_outputs(result)
     print_source_stats(result)
     if result.error:
         raise ThermodepthError(result.error)
@@ -232,8 +237,7 @@ def view_cmd(
         viewer_connect=connect,
     )
     result = run(options, [], warn_line)
-    for line in result.outputs:
-        console.print(line, soft_wrap=True, highlight=False)
+    print_outputs(result)
     if result.error:
         raise ThermodepthError(result.error)
 

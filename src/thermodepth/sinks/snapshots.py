@@ -29,14 +29,14 @@ class SnapshotSink(BaseSink):
 
     def frame(self, fused: FusedFrame) -> None:
         self._seen += 1
-        alarm = any(e["event"] == "alarm" for e in fused.events)
-        if fused.in_ffc or not (alarm or (self._seen - 1) % self.every == 0):
+        alarms = [e["rule"] for e in fused.events if e["event"] == "alarm"]
+        if fused.in_ffc or not (alarms or (self._seen - 1) % self.every == 0):
             return
         if self.range_c is None:
             self.range_c = display_range_c(fused.temp_depth_c)
         lo, hi = self.range_c
         stem = self.folder / f"frame_{fused.index:06d}"
-        rule = ", ".join(e["rule"] for e in fused.events if e["event"] == "alarm")
+        rule = ", ".join(alarms)
         title = f"frame {fused.index}, t {fused.thermal_time_s:.2f} s, VOx {fused.vox_temp_c:.2f} C"
         plot_overlay(
             fused, stem.with_suffix(".png"), title + (f": ALARM {rule}" if rule else ""), lo, hi
@@ -44,7 +44,7 @@ class SnapshotSink(BaseSink):
         points, temps = fused.points()
         write_ply(stem.with_suffix(".ply"), points, temps, lo, hi)
         self.written += 1
-        self.at_alarms += alarm
+        self.at_alarms += bool(alarms)
 
     def summary(self) -> str:
         return (

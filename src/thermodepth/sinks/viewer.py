@@ -38,7 +38,6 @@ from ..frames import Match, StreamEvent
 from ..measure import PolygonRoi, RectRoi
 from ..pipeline import FusedFrame, ViewerSettings
 from ..plotting import temperature_rgb
-from ..registration import Reason
 from .base import BaseSink, RunContext, SessionResult
 
 INSTALL = "the viewer needs rerun-sdk: pip install 'thermodepth[viewer]'"
@@ -215,9 +214,8 @@ class ViewerSink(BaseSink):
         uv = np.stack([keep % w, keep // w], axis=-1)
         z = fused.depth.ravel()[keep] * fused.calibration.depth_scale_m
         points = fused.calibration.depth.deproject(uv, z).astype(np.float32)
-        temp = fused.temp_depth_c.ravel()[keep]
-        ok = fused.reason_depth.ravel()[keep] == Reason.OK
-        return points, colour_scale(np.where(ok, temp, np.nan), self.settings.temp_range_c)
+        temp = fused.temp_depth_c.ravel()[keep]  # NaN wherever the reason is not OK
+        return points, colour_scale(temp, self.settings.temp_range_c)
 
     def _log_hotspots(self, rr: Any, fused: FusedFrame) -> None:
         if not fused.hotspots:
