@@ -8,7 +8,7 @@ from pathlib import Path
 from .. import sources
 from ..calibration import Calibration
 from ..errors import FieldError, check_count
-from ..io.recording import DEPTH_FRAMES, check_output
+from ..io.recording import check_depth_frames, check_output
 from ..progress import SILENT, Reporter
 from ..session import RecordResult, record_session
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
@@ -48,8 +48,7 @@ class RecordOptions:
         if self.duration_s is None and self.frames is None and self.source.strip() == "sim":
             raise FieldError("source", "sim never ends: give frames or a duration")
         check_timing(self.max_skew_s, self.thermal_latency_s)
-        if self.depth_frames not in DEPTH_FRAMES:
-            raise FieldError("depth_frames", f"expected one of {', '.join(DEPTH_FRAMES)}")
+        check_depth_frames(self.depth_frames)
 
 
 def record(

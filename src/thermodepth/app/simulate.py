@@ -34,8 +34,7 @@ def sweep(
     """Simulate the paper's protocol into the sweep CSV ``out`` (averaged per 1 C of VOx with
     ``by_vox``, as Tables 1-5); the config is checked first (FieldError)."""
     check_count("samples", config.samples)
-    if not config.vox_min_c < config.vox_max_c:
-        raise FieldError("vox_min_c", "must be below vox_max_c")
+    _check_vox_range(config)
     if min(config.distances_m) <= 0:
         raise FieldError("distances_m", "must be positive")
     total = len(config.distances_m) * len(config.plate_temps_c)
@@ -78,9 +77,7 @@ def board_session(
     spec = BoardSpec.parse(board, square_m)
     check_count("poses", poses)
     _check_style(style)
-    for name, value in (("hold_s", hold_s), ("move_s", move_s)):
-        if not value > 0:
-            raise FieldError(name, "must be > 0 seconds")
+    _check_seconds(hold_s=hold_s, move_s=move_s)
     check_output(out)
     frames = session_frames(poses, hold_s, move_s, LeptonModel().fps)
     with reporter.task("board session", frames) as advance:
@@ -95,14 +92,22 @@ def protocol(out: Path, config: ProtocolConfig, reporter: Reporter = SILENT) -> 
     if not config.distances_m or min(config.distances_m) <= 0:
         raise FieldError("distances_m", "give one or more distances > 0")
     check_count("pairs_per_distance", config.pairs_per_distance)
-    if not config.vox_min_c < config.vox_max_c:
-        raise FieldError("vox_min_c", "must be below vox_max_c")
-    for name in ("interval_s", "move_s"):
-        if not getattr(config, name) > 0:
-            raise FieldError(name, "must be > 0 seconds")
+    _check_vox_range(config)
+    _check_seconds(interval_s=config.interval_s, move_s=config.move_s)
     check_output(out)
     with reporter.task("protocol", config.pairs) as advance:
         return simulate_protocol(out, config, advance)
+
+
+def _check_vox_range(config: SweepConfig | ProtocolConfig) -> None:
+    if not config.vox_min_c < config.vox_max_c:
+        raise FieldError("vox_min_c", "must be below vox_max_c")
+
+
+def _check_seconds(**durations_s: float) -> None:
+    for name, value in durations_s.items():
+        if not value > 0:
+            raise FieldError(name, "must be > 0 seconds")
 
 
 def _check_style(style: str) -> None:

@@ -368,9 +368,6 @@ def simulate_board_session(
     with a thermal frame are recorded (the ones ``capture-board`` reads). The recording's
     calibration is the rig's truth. ``ffc_interval_s``: the Lepton's timed shutter (FFC
     frames are recorded, marked as such)."""
-    from ..frames import match_of
-    from ..io.recording import RecordingWriter
-
     cal = default_calibration()
     rng = np.random.default_rng(seed)
     held = [p.inverse() for p in random_board_poses(board, n_poses, cal, rng)]  # board frame
@@ -388,12 +385,7 @@ def simulate_board_session(
     )
     n_frames = session_frames(n_poses, hold_s, move_s, rig.lepton.fps)
     settings = {"source": "sim:board-session", "board": str(board), "style": style}
-    with RecordingWriter(out, cal, settings, source="sim:board-session") as writer:
-        for pair in rig.frames(n_frames):
-            writer.add_match(match_of(pair))
-            if progress:
-                progress(1)
-    return Path(out)
+    return _record(out, rig, n_frames, settings, progress)
 
 
 @dataclass(frozen=True)
@@ -460,9 +452,6 @@ def simulate_protocol(
     as such), the rig's true calibration, and the config in the recording's settings."""
     from dataclasses import asdict
 
-    from ..frames import match_of
-    from ..io.recording import RecordingWriter
-
     config = config or ProtocolConfig()
     cal = default_calibration()
     poses = [camera_pose(d) for d in config.distances_m]
@@ -481,9 +470,19 @@ def simulate_protocol(
         frame_interval_s=config.interval_s,
     )
     settings = {"source": "sim:protocol", "protocol": asdict(config)}
-    with RecordingWriter(out, cal, settings, source="sim:protocol") as writer:
-        for pair in rig.frames(config.pairs):
-            writer.add_match(match_of(pair))
+    return _record(out, rig, config.pairs, settings, progress)
+
+
+def _record(
+    out: str | Path, rig: Rig, n: int, settings: dict[str, Any], progress: Progress | None
+) -> Path:
+    """``n`` frame pairs of ``rig`` into a new recording at ``out``, with the rig's
+    calibration and ``settings`` (its ``source`` named as the recording's)."""
+    from ..io.recording import RecordingWriter  # the simulator stands below io
+
+    with RecordingWriter(out, rig.calibration, settings, source=settings["source"]) as writer:
+        for pair in rig.frames(n):
+            writer.add_pair(pair)
             if progress:
                 progress(1)
     return Path(out)

@@ -39,7 +39,7 @@ import zarr
 from numpy.typing import NDArray
 from zarr.codecs import BloscCodec, Crc32cCodec
 
-from ...errors import InputError, ThermodepthError
+from ...errors import FieldError, InputError, ThermodepthError
 from ...frames import FfcState, Telemetry
 
 FORMAT = "thermodepth-recording"
@@ -63,6 +63,14 @@ DEPTH_FRAMES = ("all", "paired")
 """Which depth frames a recording keeps (attribute ``depth_frames``): every one the camera
 gave (30 fps), or only those that pair with a thermal frame (8.7 fps: 3.4x fewer, all that a
 replay measures). A recording without the attribute keeps all."""
+
+
+def check_depth_frames(depth_frames: str) -> None:
+    """FieldError (``depth_frames``) unless it is one of :data:`DEPTH_FRAMES`."""
+    if depth_frames not in DEPTH_FRAMES:
+        raise FieldError("depth_frames", f"expected one of {', '.join(DEPTH_FRAMES)}")
+
+
 FIRST_CAPACITY = 64
 TABLE_CHUNK_ROWS = 256
 """Rows per chunk of the meta and pair tables (one file each): a row write rewrites its

@@ -17,15 +17,15 @@ import zarr
 from numpy.typing import NDArray
 
 from ...calibration import Calibration
-from ...errors import FieldError, InputError
+from ...errors import InputError
 from ...frames import DepthFrame, FramePair, Match, StreamEvent, ThermalFrame, match_of
 from .format import (
-    DEPTH_FRAMES,
     DEPTH_META,
     FORMAT,
     PAIR_COLUMNS,
     THERMAL_META,
     VERSION,
+    check_depth_frames,
     check_output,
     checksum,
     create_array,
@@ -140,8 +140,7 @@ class RecordingWriter:
         device_depth: dict[str, Any] | None = None,
         depth_frames: str = "all",
     ) -> None:
-        if depth_frames not in DEPTH_FRAMES:
-            raise FieldError("depth_frames", f"expected one of {', '.join(DEPTH_FRAMES)}")
+        check_depth_frames(depth_frames)
         self.depth_frames = depth_frames
         self.path = check_output(path, overwrite, inputs)
         try:
@@ -214,14 +213,20 @@ class RecordingWriter:
             t = self.add_thermal(match.thermal)
         self.add_pair_rows(d, t, match.pair.index)
 
+    def keeps(self, event: StreamEvent) -> bool:
+        """Whether the recording keeps ``event``: all but a depth frame alone when only
+        paired ones are kept (its match, if it pairs, writes it)."""
+        return not (isinstance(event, DepthFrame) and self.depth_frames == "paired")
+
     def add(self, event: StreamEvent) -> None:
-        """Write what a source emitted (a depth frame, a thermal frame or a match); a depth
-        frame alone is skipped when only paired ones are kept (its match writes it)."""
+        """Write what a source emitted (a depth frame, a thermal frame or a match), if the
+        recording keeps it (:meth:`keeps`)."""
+        if not self.keeps(event):
+            return
         if isinstance(event, Match):
             self.add_match(event)
         elif isinstance(event, DepthFrame):
-            if self.depth_frames == "all":
-                self.add_depth(event)
+            self.add_depth(event)
         else:
             self.add_thermal(event)
 
@@ -330,8 +335,8 @@ class Recorder:
     def add(self, event: StreamEvent) -> None:
         if self._error is not None:
             raise self._error
-        if isinstance(event, DepthFrame) and self.writer.depth_frames == "paired":
-            return  # its match, if it pairs, brings it
+        if not self.writer.keeps(event):
+            return  # not queued: no slot taken, nothing dropped
         if isinstance(event, Match) and (
             event.depth.index in self._dropped_depth or event.thermal.index in self._dropped_thermal
         ):
