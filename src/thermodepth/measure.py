@@ -138,7 +138,7 @@ def roi_stats(
     values = values[np.isfinite(values)]
     flag = int(np.bitwise_or.reduce(flags, axis=None, initial=0)) if flags is not None else 0
     if values.size == 0:
-        return RoiStats.of(name, Moments(0, 0, 0, np.nan, np.nan, flag))
+        return RoiStats.of(name, Moments.none(flag))
     q = _fixed(values)
     moments = Moments(
         int(values.size),

@@ -336,7 +336,8 @@ def sample(
     lo, hi, reach = view
     out, reason, index, want_index, near = into
     bits = out.view(np.int32)
-    # the flags regions OR: gathered with the values, so that sum_row reads them in a row
+    # the flags the regions OR: gathered once per row for all of them, so that sum_row
+    # reads them in order
     flags = sums.flags
     with_flags = flags.size > 0 and sums.boxes.shape[0] > 0
     tol_sigma, tol_slope = how.tol_sigma, how.tol_slope

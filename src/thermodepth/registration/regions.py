@@ -56,6 +56,12 @@ class Moments:
     max: float
     flags: int
 
+    @classmethod
+    def none(cls, flags: int) -> Moments:
+        """The moments of a region without a member that has a value (its flags may still
+        say why)."""
+        return cls(0, 0, 0, float("nan"), float("nan"), flags)
+
     @property
     def mean(self) -> float:
         """The mean value (NaN when n = 0)."""
@@ -98,8 +104,8 @@ class Regions:
         starts = np.cumsum([0] + [r.mask.size for r in regions])
         self._masks = np.concatenate([r.mask.ravel() for r in regions] + [np.zeros(0, np.uint8)])
         strides = [r.mask.shape[1] if r.mask.shape[0] > 1 else 0 for r in regions]
-        self._mask_at = np.array(list(zip(starts[:-1], strides, strict=True)), np.int64)
-        self._mask_at = self._mask_at.reshape(-1, 2)
+        at = list(zip(starts[:-1], strides, strict=True))
+        self._mask_at = np.array(at, np.int64).reshape(-1, 2)
 
     def row_sums(self, flags: NDArray[np.uint8] | None = None) -> RowSums:
         """Fresh sums for one frame; ``flags`` (h, w) uint8 of the thermal pixels (None or
@@ -127,12 +133,9 @@ class Regions:
         low = _key_flip(keys[:, 0].min(axis=1)).view(np.float32).tolist()
         high = _key_flip(keys[:, 1].max(axis=1)).view(np.float32).tolist()
         return [
-            Moments(n, sum_q, int(sq), lo, hi, fl) if n else Moments(0, 0, 0, _NAN, _NAN, fl)
+            Moments(n, sum_q, int(sq), lo, hi, fl) if n else Moments.none(fl)
             for (n, sum_q), sq, lo, hi, fl in zip(totals, squares, low, high, flags, strict=True)
         ]
-
-
-_NAN = float("nan")
 
 
 def _key_flip(keys: NDArray[np.int32]) -> NDArray[np.int32]:
