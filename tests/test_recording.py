@@ -187,10 +187,7 @@ def test_paired_depth_keeps_only_the_depth_frames_that_pair(tmp_path: Path, via:
 
 
 def test_paired_depth_needs_both_cameras(tmp_path: Path) -> None:
-    depth = [DepthFrame(np.full((3, 4), i, np.uint16), i / 30, i) for i in range(3)]
-    with RecordingWriter(tmp_path / "d.zarr") as w:
-        for d in depth:
-            w.add(d)
+    depth_only(tmp_path / "d.zarr", 3)
     src = open_source(f"recording:{tmp_path / 'd.zarr'}")
     with pytest.raises(InputError, match="gives depth only; FramePairs need"):
         record_session(src, tmp_path / "p.zarr", depth_frames="paired")
@@ -217,11 +214,17 @@ def test_replay_reads_ahead_in_batches_bit_for_bit(tmp_path: Path) -> None:
     assert not [t for t in threading.enumerate() if t.name.startswith("replay-read")]
 
 
-def test_a_recording_of_one_camera_replays_its_frames(tmp_path: Path) -> None:
-    depth = [DepthFrame(np.full((3, 4), i, np.uint16), i / 30, i) for i in range(5)]
-    with RecordingWriter(tmp_path / "d.zarr") as w:
+def depth_only(path: Path, n: int) -> list[DepthFrame]:
+    """A recording of ``n`` small depth frames at 30 fps and no thermal camera."""
+    depth = [DepthFrame(np.full((3, 4), i, np.uint16), i / 30, i) for i in range(n)]
+    with RecordingWriter(path) as w:
         for d in depth:
             w.add(d)
+    return depth
+
+
+def test_a_recording_of_one_camera_replays_its_frames(tmp_path: Path) -> None:
+    depth = depth_only(tmp_path / "d.zarr", 5)
     src = open_source(f"recording:{tmp_path / 'd.zarr'}")
     assert src.streams == {"depth"}
     result = record_session(src, tmp_path / "again.zarr")
