@@ -14,9 +14,12 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import google_crc32c
 import numpy as np
 import pytest
 import zarr
+from numcodecs import Blosc
+from zarr.codecs import ZstdCodec
 
 from thermodepth.errors import FieldError, InputError
 from thermodepth.frames import (
@@ -36,7 +39,9 @@ from thermodepth.io.recording import (
     Recording,
     RecordingWarning,
     RecordingWriter,
+    checksum,
 )
+from thermodepth.io.recording.chunks import ChunkError, FrameChunks
 from thermodepth.io.recording.reader import READ_AHEAD
 from thermodepth.session import record_session
 from thermodepth.sim import Rig, camera_pose, plate_scene
@@ -269,7 +274,7 @@ def test_missing_chunk_is_caught_by_the_checksum(tmp_path: Path) -> None:
     rec = Recording(out, warn=lines.append)
     assert [p.index for p in rec.pairs()] == [0, 2]
     assert rec.skipped == 1
-    assert lines == [f"{out}: pair 1 skipped: depth frame 1: pixels do not match their CRC-32"]
+    assert lines == [f"{out}: pair 1 skipped: depth frame 1: pixels do not match their CRC-32C"]
 
 
 KILL_SCRIPT = """
@@ -425,6 +430,74 @@ def test_not_a_recording(tmp_path: Path, make, message: str) -> None:  # type: i
         open_source(f"recording:{p}")
 
 
+def as_version_1(path: Path) -> None:
+    """Rewrite a recording as version 1 wrote it: zlib's CRC-32 of the pixels."""
+    root = zarr.open_group(str(path), mode="r+")
+    for stream in ("depth", "thermal"):
+        meta, image = root[f"{stream}/meta"], root[f"{stream}/image"]
+        rows = np.asarray(meta[:])
+        for row in range(len(rows)):
+            if not np.isnan(rows[row, 0]):
+                rows[row, 2] = checksum(np.asarray(image[row]), version=1)
+        meta[:] = rows
+    root.attrs["version"] = 1
+
+
+def test_version_1_recordings_replay_and_other_versions_are_refused(tmp_path: Path) -> None:
+    out = tmp_path / "v.zarr"
+    record_session(SimSource(sim_rig()), out, frames=3)
+    now = [(p.depth, p.thermal) for p in Recording(out).pairs()]
+    as_version_1(out)
+    lines: list[str] = []
+    old = [(p.depth, p.thermal) for p in Recording(out, warn=lines.append).pairs()]
+    assert not lines and len(old) == len(now) == 3
+    for (d0, t0), (d1, t1) in zip(now, old, strict=True):
+        assert np.array_equal(d0, d1) and np.array_equal(t0, t1)
+    # version 1 checks zlib's CRC-32: a CRC-32C there fails it
+    root = zarr.open_group(str(out), mode="r+")
+    meta = np.asarray(root["thermal/meta"][:])
+    meta[1, 2] = checksum(np.asarray(root["thermal/image"][1]), version=2)
+    root["thermal/meta"][:] = meta
+    list(Recording(out, warn=lines.append).pairs())
+    assert lines == [f"{out}: pair 1 skipped: thermal frame 1: pixels do not match their CRC-32"]
+    root.attrs["version"] = 3
+    refused = r"recording version 3 is not supported \(.* reads versions 1, 2\)"
+    with pytest.raises(InputError, match=refused):
+        Recording(out)
+
+
+def test_frames_are_read_from_their_chunk_files_as_zarr_reads_them(tmp_path: Path) -> None:
+    out = tmp_path / "c.zarr"
+    record_session(SimSource(sim_rig(with_ir=True)), out, frames=3)
+    root = zarr.open_group(str(out), mode="r")
+    for name in ("depth/image", "depth/ir", "thermal/image"):
+        chunks = FrameChunks(root[name])
+        assert chunks.direct, name
+        assert np.array_equal(chunks.rows(0, 2), root[name][0:3])
+    chunks = FrameChunks(root["depth/image"])
+    path = out / "depth" / "image" / "c" / "1" / "0" / "0"
+    data = bytearray(path.read_bytes())
+    # a chunk of a smaller frame, whole and with its own CRC-32C: the wrong size
+    small = Blosc(cname="zstd", clevel=1, shuffle=Blosc.SHUFFLE).encode(np.ones((4, 4), np.uint16))
+    crc = google_crc32c.value(small).to_bytes(4, "little")
+    for damage, message in (
+        (data[:100] + bytes([data[100] ^ 1]) + data[101:], "does not match its CRC-32C"),
+        (data[:10], "10 bytes, too short for a chunk"),
+        (small + crc, f"the chunk holds 32 bytes, a frame {1280 * 720 * 2}"),
+    ):
+        path.write_bytes(bytes(damage))
+        with pytest.raises(ChunkError, match=message):
+            chunks.rows(1, 1)
+    path.unlink()  # absent: the fill value, as zarr reads it (the frame's checksum fails)
+    assert not chunks.rows(0, 2)[1].any() and chunks.rows(0, 2)[0].any()
+    # an array with other codecs is read through zarr
+    other = zarr.create_array(str(tmp_path / "z.zarr"), shape=(2, 3, 4), chunks=(1, 3, 4),
+                              dtype=np.uint16, compressors=[ZstdCodec()])  # fmt: skip
+    other[:] = np.arange(24, dtype=np.uint16).reshape(2, 3, 4)
+    assert not FrameChunks(other).direct
+    assert np.array_equal(FrameChunks(other).rows(0, 1), other[:])
+
+
 def test_writer_refuses_mismatched_frames(tmp_path: Path) -> None:
     w = RecordingWriter(tmp_path / "w.zarr")
     w.add_depth(DepthFrame(np.zeros((720, 1280), np.uint16), 0.0, 0))
@@ -572,10 +645,10 @@ def test_skips_of_different_causes_or_apart_are_told_apart(tmp_path: Path) -> No
     lines: list[str] = []
     assert [p.index for p in Recording(out, warn=lines.append).pairs()] == [0, 4]
     assert lines == [
-        f"{out}: pairs 1-2 skipped: depth frame 1: pixels do not match their CRC-32 (and alike "
+        f"{out}: pairs 1-2 skipped: depth frame 1: pixels do not match their CRC-32C (and alike "
         "for the 1 after)",
-        f"{out}: pair 3 skipped: thermal frame 3: pixels do not match their CRC-32",
-        f"{out}: pair 5 skipped: depth frame 5: pixels do not match their CRC-32",
+        f"{out}: pair 3 skipped: thermal frame 3: pixels do not match their CRC-32C",
+        f"{out}: pair 5 skipped: depth frame 5: pixels do not match their CRC-32C",
     ]
 
 

@@ -2,7 +2,8 @@
 
 :mod:`.format` holds the layout (arrays, tables, codecs, checksums; docs/recording.md),
 :mod:`.writer` appends (:class:`RecordingWriter`) and records in the background
-(:class:`Recorder`), :mod:`.reader` replays (:class:`Recording`).
+(:class:`Recorder`), :mod:`.reader` replays (:class:`Recording`), reading image frames
+through :mod:`.chunks`.
 """
 
 from .format import (

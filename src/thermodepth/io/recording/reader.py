@@ -6,6 +6,7 @@ from __future__ import annotations
 import heapq
 import re
 import warnings
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -19,10 +20,11 @@ from numpy.typing import NDArray
 from ...calibration import Calibration
 from ...errors import InputError
 from ...frames import DepthFrame, FfcState, FramePair, Match, ThermalFrame, pair_of
+from .chunks import FrameChunks
 from .format import (
     FORMAT,
     THERMAL_META,
-    VERSION,
+    VERSIONS,
     CorruptFrameError,
     RecordingWarning,
     checksum,
@@ -147,11 +149,13 @@ class Recording:
             ) from None
         if attrs.get("format") != FORMAT:
             raise InputError(f"{self.path}: not a thermodepth recording (no format attribute)")
-        if attrs.get("version") != VERSION:
+        version = attrs.get("version")
+        if version not in VERSIONS:
             raise InputError(
-                f"{self.path}: recording version {attrs.get('version')} is not supported "
-                f"(expected {VERSION})"
+                f"{self.path}: recording version {version} is not supported (this "
+                f"thermodepth reads versions {', '.join(map(str, VERSIONS))})"
             )
+        self.version = int(version)
         self.attrs = attrs
         self.warn = warn or (lambda msg: warnings.warn(msg, RecordingWarning, stacklevel=3))
         self.skipped = 0
@@ -174,6 +178,11 @@ class Recording:
                 ) from None
             if isinstance(node, zarr.Array):
                 self._arrays[name] = node
+        self._images = {
+            name: FrameChunks(a)
+            for name, a in self._arrays.items()
+            if name.endswith(("image", "ir"))
+        }
         self._depth = self._table("depth/meta", _nan_rows, np.nan)
         self._thermal = self._table("thermal/meta", _nan_rows, np.nan)
         self._pairs = self._table("pairs", _negative_rows, -1)
@@ -246,10 +255,11 @@ class Recording:
         return ("image", "ir") if stream == "depth" and self.with_ir else ("image",)
 
     def _frame(self, stream: str, row: int, meta: NDArray[Any], arrays: list[Any]) -> Any:
-        """The frame at ``row`` from its meta row and arrays, checked against the CRC-32;
-        CorruptFrameError if they do not match."""
-        if checksum(*arrays) != int(meta[2]):
-            raise CorruptFrameError(f"{stream} frame {row}: pixels do not match their CRC-32")
+        """The frame at ``row`` from its meta row and arrays, checked against the checksum
+        it holds; CorruptFrameError if they do not match."""
+        if checksum(*arrays, version=self.version) != int(meta[2]):
+            name = "CRC-32C" if self.version > 1 else "CRC-32"
+            raise CorruptFrameError(f"{stream} frame {row}: pixels do not match their {name}")
         if stream == "depth":
             ir = arrays[1] if self.with_ir else None
             return DepthFrame(arrays[0], float(meta[0]), int(meta[1]), ir)
@@ -257,10 +267,9 @@ class Recording:
 
     def _frames_at(self, stream: str, rows: list[int]) -> list[Any]:
         """The frames of ``stream`` at ``rows`` (in that order, repeats allowed), each a frame
-        or the CorruptFrameError that stops it. Each run of consecutive rows is read with one
-        zarr call per array (zarr fetches and decodes its chunks concurrently, blosc without
-        the GIL); a run with a corrupt chunk is read again row by row, so that costs its
-        frame only."""
+        or the CorruptFrameError that stops it. Each run of consecutive rows is read at once
+        (:class:`~.chunks.FrameChunks`: blosc decodes without the GIL); a run with a corrupt
+        chunk is read again row by row, so that costs its frame only."""
         table = self._depth if stream == "depth" else self._thermal
         out: list[Any] = [None] * len(rows)
         usable: dict[int, list[int]] = {}  # row -> its places in ``rows``
@@ -273,9 +282,7 @@ class Recording:
         names = self._arrays_of(stream)
         for first, last in _runs(sorted(usable)):
             try:
-                blocks = [
-                    np.asarray(self._arrays[f"{stream}/{n}"][first : last + 1]) for n in names
-                ]
+                blocks = [self._images[f"{stream}/{n}"].rows(first, last) for n in names]
             except Exception:  # a corrupt chunk among them: one by one
                 blocks = None
             for row in range(first, last + 1):
@@ -293,7 +300,7 @@ class Recording:
 
     def _chunk(self, stream: str, name: str, row: int) -> NDArray[Any]:
         try:
-            return np.asarray(self._arrays[f"{stream}/{name}"][row])
+            return self._images[f"{stream}/{name}"].rows(row, row)[0]
         except Exception as exc:
             raise CorruptFrameError(
                 f"{stream} frame {row}: unreadable chunk ({short_error(exc)})"
@@ -354,8 +361,8 @@ class Recording:
         """The recorded pairs ``start`` to ``stop`` (rows of the pairs table; default: all)
         with their frames, in order; unreadable ones skipped and counted (one warning line
         each, or one per table chunk warned about on open). The pairs are read
-        :data:`READ_AHEAD` at a time by a thread, a batch ahead of the one being used, so
-        decoding overlaps the caller's work."""
+        :data:`READ_AHEAD` at a time by :data:`READ_THREADS` threads, each a batch ahead of
+        the one being used, so decoding overlaps the caller's work."""
 
         def read_batch(batch: list[tuple[int, ...]]) -> list[Any]:
             depth = self._frames_at("depth", [int(r[1]) for r in batch])
@@ -409,8 +416,11 @@ class Recording:
 
 
 READ_AHEAD = 8
-"""Frames or pairs a replay reads at once, on a thread, one batch ahead of the caller:
-enough that zarr's per-call cost is shared (measured in docs/recording.md, "Replay")."""
+"""Frames or pairs a replay reads at once (a batch), one batch per reading thread."""
+READ_THREADS = 2
+"""Threads that read batches ahead of the caller, each its own batch: on 2 cores decoding
+one depth frame takes longer than fusing a pair, so one thread would hold the replay back
+(measured in docs/recording.md, "Replay")."""
 
 
 def _given(item: Any) -> Any:
@@ -421,18 +431,19 @@ def _given(item: Any) -> Any:
 
 
 def _read_ahead(rows: list[Any], read: Callable[[list[Any]], list[Any]]) -> Iterator[Any]:
-    """``read(batch)`` for each batch of :data:`READ_AHEAD` rows, run on a thread one batch
-    ahead of the consumer; yields the items in order. A consumer that stops early stops the
-    thread after the batch in hand."""
+    """``read(batch)`` for each batch of :data:`READ_AHEAD` rows, :data:`READ_THREADS`
+    batches at a time on threads ahead of the consumer; yields the items in order. A
+    consumer that stops early stops the threads after the batches in hand."""
     batches = [rows[a : a + READ_AHEAD] for a in range(0, len(rows), READ_AHEAD)]
-    if not batches:
-        return
-    with ThreadPoolExecutor(1, thread_name_prefix="replay-read") as pool:
-        ahead = pool.submit(read, batches[0])
+    with ThreadPoolExecutor(READ_THREADS, thread_name_prefix="replay-read") as pool:
+        ahead = deque(pool.submit(read, b) for b in batches[:READ_THREADS])
         try:
-            for nxt in batches[1:]:
-                done, ahead = ahead, pool.submit(read, nxt)
+            for nxt in batches[READ_THREADS:]:
+                done = ahead.popleft()
+                ahead.append(pool.submit(read, nxt))
                 yield from done.result()
-            yield from ahead.result()
+            while ahead:
+                yield from ahead.popleft().result()
         finally:
-            ahead.cancel()
+            for future in ahead:
+                future.cancel()
