@@ -4,11 +4,11 @@ An image array holds one frame per chunk (:func:`~.format.create_array`). Read t
 each call goes through its event loop, a thread per codec and a copy out of the chunk buffer:
 measured on a replay, a pair took 4.0-4.3 ms of CPU to read that way and 2.9 ms from the chunk
 files, of which blosc decoding the 1280x720 depth frame is 1.6 ms (docs/recording.md,
-"Replay"). For an array on a local disk stored as we write
-it (one frame per chunk, bytes little endian -> Blosc -> CRC-32C, no sharding),
-:class:`FrameChunks` reads the chunk's file, checks its CRC-32C and has blosc decode it
-straight into the frame, holding no lock: several threads decode frames at once. Any other
-array (a remote store, other codecs) is read through zarr, as before.
+"Replay"). For an array on a local disk stored as we write it (one frame per chunk, bytes
+little endian -> Blosc -> CRC-32C, no sharding), :class:`FrameChunks` reads the chunk's file,
+checks its CRC-32C and has blosc decode it straight into the frame, holding no lock: several
+threads decode frames at once. Any other array (a remote store, other codecs) is read
+through zarr.
 """
 
 from __future__ import annotations
