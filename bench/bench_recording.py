@@ -6,7 +6,8 @@ online, into a non-blocking Recorder (a full queue drops frames, as with live ca
 ``LIVE_S`` seconds, ``RUNS`` times: frames dropped, raw MB/s, MB/s on disk, writer busy time.
 The same with ``--depth paired`` (only the depth frames that pair are written).
 Capacity: frames written back to back (blocking) -- the headroom over 30 fps.
-Per-frame costs as medians; peer: Blosc zstd-1 compression of one depth frame alone.
+Per-frame costs as medians; peer: the recording's Blosc codec compressing one depth frame
+alone (on one thread, as the recorder's writer thread does).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from numcodecs import Blosc, blosc
 
 from thermodepth.frames import DepthFrame, ThermalFrame
 from thermodepth.io.recording import Recorder, RecordingWriter, compressors, store_size_bytes
@@ -116,17 +118,23 @@ def main() -> None:
             counts, tel = thermal[i % len(thermal)]
             w.add_thermal(ThermalFrame(counts, i / 8.7, i, tel))  # type: ignore[arg-type]
 
-        blosc = compressors()[0]
-        from numcodecs import Blosc
-
-        nc = Blosc(cname="zstd", clevel=blosc.clevel, shuffle=Blosc.SHUFFLE)
+        codec = compressors()[0]
+        name = f"{codec.cname.value}-{codec.clevel}"
+        shuffle = {"noshuffle": Blosc.NOSHUFFLE, "shuffle": Blosc.SHUFFLE}
+        nc = Blosc(
+            codec.cname.value, codec.clevel, shuffle.get(codec.shuffle.value, Blosc.BITSHUFFLE)
+        )
+        blosc.use_threads = False  # as on the writer thread
         timings = [
             measure(
-                "write one depth frame (zstd-1 + CRC, commit row)", counting(write_depth), n=40
+                f"write one depth frame ({name} + CRC, commit row)", counting(write_depth), n=40
             ),
             measure("write one thermal frame + telemetry", counting(write_thermal), n=40),
-            measure("Blosc zstd-1 compress one depth frame (peer)", lambda: nc.encode(depth[0])),
+            measure(
+                peer := f"Blosc {name} compress one depth frame (peer)", lambda: nc.encode(depth[0])
+            ),
         ]
+        blosc.use_threads = None
         w.close()
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -137,7 +145,7 @@ def main() -> None:
     report(
         "recording",
         timings,
-        peer="Blosc zstd-1 compress one depth frame (peer)",
+        peer=peer,
         notes={
             "live runs": f"{RUNS} x {LIVE_S:g} s at 30 fps depth + 8.7 fps thermal, non-blocking",
             "frames offered per run": f"{runs[0]['depth_offered']} depth, "

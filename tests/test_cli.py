@@ -209,6 +209,10 @@ def test_record_sim_command(tmp_path: Path) -> None:
     assert "recorded 3 pairs (3 depth, 3 thermal frames), dropped 0" in result.output
     assert "stopped: frames" in result.output
     assert Recording(out).n_pairs == 3
+    small = tmp_path / "z.zarr"
+    args = ["record", "--source", f"recording:{out}", "-o", str(small), "--codec", "zstd"]
+    assert runner.invoke(app, args).exit_code == 0
+    assert Recording(small)._arrays["depth/image"].metadata.codecs[1].cname.value == "zstd"
 
 
 @pytest.mark.parametrize(
@@ -230,6 +234,7 @@ def test_record_sim_command(tmp_path: Path) -> None:
             ["--source", "sim", "--frames", "1", "--thermal-latency-ms", "-5"],
             "--thermal-latency-ms: must be >= 0",
         ),
+        (["--source", "sim", "--frames", "1", "--codec", "gzip"], "--codec: expected one of lz4"),
     ],
 )
 def test_record_bad_input_is_one_line(tmp_path: Path, args: list[str], message: str) -> None:

@@ -33,6 +33,7 @@ from thermodepth.frames import (
     pair_of,
 )
 from thermodepth.io.recording import (
+    CODECS,
     TABLE_CHUNK_ROWS,
     CorruptFrameError,
     Recorder,
@@ -189,6 +190,26 @@ def test_paired_depth_keeps_only_the_depth_frames_that_pair(tmp_path: Path, via:
     assert paired.n_depth == paired.n_pairs  # one depth frame per pair, no more
     for a, b in zip(every.pairs(), paired.pairs(), strict=True):
         assert_same_pair(a, b)
+
+
+def test_either_codec_replays_bit_for_bit_and_reads_from_the_chunk_files(tmp_path: Path) -> None:
+    recs = {}
+    for codec in CODECS:
+        record_session(SimSource(sim_rig(with_ir=True)), tmp_path / codec, frames=3, codec=codec)
+        recs[codec] = Recording(tmp_path / codec)
+        array = recs[codec]._arrays["depth/image"]
+        blosc = array.metadata.codecs[1]
+        assert (blosc.cname, blosc.clevel, blosc.shuffle) == (
+            CODECS[codec].cname,
+            CODECS[codec].clevel,
+            CODECS[codec].shuffle,
+        )
+        assert FrameChunks(array).direct
+    for a, b in zip(recs["lz4"].pairs(), recs["zstd"].pairs(), strict=True):
+        assert_same_pair(a, b)
+        assert a.ir is not None
+    with pytest.raises(FieldError, match=r"^codec: expected one of lz4, zstd$"):
+        RecordingWriter(tmp_path / "x.zarr", codec="gzip")
 
 
 def test_paired_depth_needs_both_cameras(tmp_path: Path) -> None:

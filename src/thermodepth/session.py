@@ -21,7 +21,7 @@ from typing import Any
 from .calibration import Calibration
 from .errors import InputError, ThermodepthError, check_count
 from .frames import DepthFrame, Match, StreamEvent, ThermalFrame
-from .io.recording import RecorderStats
+from .io.recording import DEFAULT_CODEC, RecorderStats
 from .pipeline import Pipeline
 from .progress import SILENT, Reporter
 from .sinks.base import RunContext, SessionResult, Sink
@@ -158,12 +158,14 @@ def record_session(
     overwrite: bool = False,
     reporter: Reporter = SILENT,
     depth_frames: str = "all",
+    codec: str = DEFAULT_CODEC,
 ) -> RecordResult:
     """Record ``source`` into a new recording at ``out`` (:func:`stream_session` with the
     recorder as its one sink: the recording keeps every frame written, whatever ends it);
-    ``depth_frames``: all of them, or only the ``"paired"`` ones."""
+    ``depth_frames``: all of them, or only the ``"paired"`` ones; ``codec``: the images'
+    (:data:`~thermodepth.io.recording.format.CODECS`)."""
     result = RecordResult(path=Path(out), pairing=source.pairing)
-    recorder = RecorderSink(out, overwrite=overwrite, depth_frames=depth_frames)
+    recorder = RecorderSink(out, overwrite=overwrite, depth_frames=depth_frames, codec=codec)
     try:
         stream_session(
             source,

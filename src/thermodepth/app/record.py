@@ -8,7 +8,7 @@ from pathlib import Path
 from .. import sources
 from ..calibration import Calibration
 from ..errors import FieldError, check_count
-from ..io.recording import check_depth_frames, check_output
+from ..io.recording import DEFAULT_CODEC, check_codec, check_depth_frames, check_output
 from ..progress import SILENT, Reporter
 from ..session import RecordResult, record_session
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
@@ -26,7 +26,7 @@ class RecordOptions:
     live cameras (s); with_ir: also the infrared image; overwrite: replace an existing
     recording (nothing else is replaced); depth_frames: keep ``"all"`` the depth frames or
     only those ``"paired"`` with a thermal frame (3.4x fewer at 30 + 8.7 fps; needs both
-    cameras).
+    cameras); codec: the images' (``lz4``, fast; ``zstd``, smaller).
     """
 
     source: str
@@ -39,6 +39,7 @@ class RecordOptions:
     with_ir: bool = False
     overwrite: bool = False
     depth_frames: str = "all"
+    codec: str = DEFAULT_CODEC
 
     def check(self) -> None:
         """One FieldError for an option that cannot be (a simulator with no end included)."""
@@ -49,6 +50,7 @@ class RecordOptions:
             raise FieldError("source", "sim never ends: give frames or a duration")
         check_timing(self.max_skew_s, self.thermal_latency_s)
         check_depth_frames(self.depth_frames)
+        check_codec(self.codec)
 
 
 def record(
@@ -76,4 +78,5 @@ def record(
         overwrite=options.overwrite,
         reporter=reporter,
         depth_frames=options.depth_frames,
+        codec=options.codec,
     )

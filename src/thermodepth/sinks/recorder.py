@@ -6,7 +6,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..frames import StreamEvent
-from ..io.recording import Recorder, RecorderStats, RecordingWriter, check_output
+from ..io.recording import (
+    DEFAULT_CODEC,
+    Recorder,
+    RecorderStats,
+    RecordingWriter,
+    check_output,
+)
 from .base import BaseSink, RunContext, SessionResult, closing_attrs
 
 
@@ -23,10 +29,17 @@ class RecorderSink(BaseSink):
     the pairing statistics and the source's counters (:func:`~thermodepth.session.closing_attrs`).
     """
 
-    def __init__(self, out: str | Path, overwrite: bool = False, depth_frames: str = "all") -> None:
+    def __init__(
+        self,
+        out: str | Path,
+        overwrite: bool = False,
+        depth_frames: str = "all",
+        codec: str = DEFAULT_CODEC,
+    ) -> None:
         self.out = Path(out)
         self.overwrite = overwrite
         self.depth_frames = depth_frames
+        self.codec = codec
         self.recorder: Recorder | None = None
 
     @property
@@ -50,6 +63,7 @@ class RecorderSink(BaseSink):
             inputs=source.files,
             device_depth=source.device_depth,
             depth_frames=self.depth_frames,
+            codec=self.codec,
         )
         self.recorder = Recorder(writer, block=not source.live)
 

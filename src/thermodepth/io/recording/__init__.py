@@ -7,12 +7,15 @@ through :mod:`.chunks`.
 """
 
 from .format import (
+    CODECS,
+    DEFAULT_CODEC,
     DEPTH_FRAMES,
     FORMAT,
     TABLE_CHUNK_ROWS,
     VERSION,
     CorruptFrameError,
     RecordingWarning,
+    check_codec,
     check_depth_frames,
     check_output,
     checksum,
@@ -26,6 +29,8 @@ from .reader import Recording
 from .writer import Recorder, RecorderStats, RecordingWriter
 
 __all__ = [
+    "CODECS",
+    "DEFAULT_CODEC",
     "DEPTH_FRAMES",
     "FORMAT",
     "TABLE_CHUNK_ROWS",
@@ -36,6 +41,7 @@ __all__ = [
     "Recording",
     "RecordingWarning",
     "RecordingWriter",
+    "check_codec",
     "check_depth_frames",
     "check_output",
     "checksum",

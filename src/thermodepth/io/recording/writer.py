@@ -20,11 +20,13 @@ from ...calibration import Calibration
 from ...errors import InputError
 from ...frames import DepthFrame, FramePair, Match, StreamEvent, ThermalFrame, match_of
 from .format import (
+    DEFAULT_CODEC,
     DEPTH_META,
     FORMAT,
     PAIR_COLUMNS,
     THERMAL_META,
     VERSION,
+    check_codec,
     check_depth_frames,
     check_output,
     checksum,
@@ -60,8 +62,9 @@ class _TableWriter:
 class _Stream:
     """One time axis of the store: image arrays (+ optional ir) and a meta array."""
 
-    def __init__(self, root: zarr.Group, name: str, columns: tuple[str, ...]) -> None:
+    def __init__(self, root: zarr.Group, name: str, columns: tuple[str, ...], codec: str) -> None:
         self.root = root
+        self.codec = codec
         self.name = name
         self.columns = columns
         self.rows = 0
@@ -72,9 +75,9 @@ class _Stream:
 
     def create(self, shape: tuple[int, int], with_ir: bool) -> None:
         g = self.root.require_group(self.name)
-        self.arrays["image"] = create_array(g, "image", shape, np.uint16, 0)
+        self.arrays["image"] = create_array(g, "image", shape, np.uint16, 0, self.codec)
         if with_ir:
-            self.arrays["ir"] = create_array(g, "ir", shape, np.uint8, 0)
+            self.arrays["ir"] = create_array(g, "ir", shape, np.uint8, 0, self.codec)
         # the meta array is created last: its presence means the stream's arrays exist
         self.arrays["meta"] = create_array(g, "meta", (len(self.columns),), np.float64, np.nan)
         self.meta = _TableWriter(self.arrays["meta"], np.nan)
@@ -126,7 +129,8 @@ class RecordingWriter:
     ...); device_depth: the depth camera's own intrinsics and depth unit (a calibration
     file's ``depth`` section), stored whether or not a calibration is; depth_frames: keep
     ``"all"`` the depth frames, or only those ``"paired"`` with a thermal frame (a depth frame
-    alone is then not written; :data:`~thermodepth.io.recording.format.DEPTH_FRAMES`).
+    alone is then not written; :data:`~thermodepth.io.recording.format.DEPTH_FRAMES`);
+    codec: the images' codec (:data:`~thermodepth.io.recording.format.CODECS`).
     """
 
     def __init__(
@@ -139,8 +143,10 @@ class RecordingWriter:
         inputs: tuple[Path, ...] = (),
         device_depth: dict[str, Any] | None = None,
         depth_frames: str = "all",
+        codec: str = DEFAULT_CODEC,
     ) -> None:
         check_depth_frames(depth_frames)
+        check_codec(codec)
         self.depth_frames = depth_frames
         self.path = check_output(path, overwrite, inputs)
         try:
@@ -160,8 +166,8 @@ class RecordingWriter:
                 "complete": False,
             }
         )
-        self.depth = _Stream(self.root, "depth", DEPTH_META)
-        self.thermal = _Stream(self.root, "thermal", THERMAL_META)
+        self.depth = _Stream(self.root, "depth", DEPTH_META, codec)
+        self.thermal = _Stream(self.root, "thermal", THERMAL_META, codec)
         self.pairs: _TableWriter | None = None
         self.n_pairs = 0
         # rows of recent frames by (index, time): a camera that restarts numbers again from 0
