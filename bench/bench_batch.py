@@ -20,6 +20,7 @@ import numpy as np
 
 from thermodepth.app.batch import BatchOptions, batch
 from thermodepth.app.run import RunOptions, run
+from thermodepth.io.recording import DEFAULT_CODEC
 
 from .bench_replay import live_events, write
 from .common import Timing, report
@@ -35,7 +36,7 @@ def main() -> None:
         events = live_events(600)
         recordings = []
         for i in range(max(SIZES)):
-            write(tmp / f"r{i}.zarr", events, "paired")
+            write(tmp / f"r{i}.zarr", events, "paired", DEFAULT_CODEC)
             recordings.append(str(tmp / f"r{i}.zarr"))
         settings = tmp / "s.yaml"
         settings.write_text(SETTINGS, encoding="utf-8")
