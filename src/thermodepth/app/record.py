@@ -8,7 +8,7 @@ from pathlib import Path
 from .. import sources
 from ..calibration import Calibration
 from ..errors import FieldError, check_count
-from ..io.recording import DEFAULT_CODEC, check_codec, check_depth_frames, check_output
+from ..io.recording import DEFAULT_CODEC, check_output, check_storage
 from ..progress import SILENT, Reporter
 from ..session import RecordResult, record_session
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
@@ -49,8 +49,7 @@ class RecordOptions:
         if self.duration_s is None and self.frames is None and self.source.strip() == "sim":
             raise FieldError("source", "sim never ends: give frames or a duration")
         check_timing(self.max_skew_s, self.thermal_latency_s)
-        check_depth_frames(self.depth_frames)
-        check_codec(self.codec)
+        check_storage(self.depth_frames, self.codec)
 
 
 def record(

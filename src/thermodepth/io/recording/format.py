@@ -72,12 +72,6 @@ gave (30 fps), or only those that pair with a thermal frame (8.7 fps: 3.4x fewer
 replay measures). A recording without the attribute keeps all."""
 
 
-def check_depth_frames(depth_frames: str) -> None:
-    """FieldError (``depth_frames``) unless it is one of :data:`DEPTH_FRAMES`."""
-    if depth_frames not in DEPTH_FRAMES:
-        raise FieldError("depth_frames", f"expected one of {', '.join(DEPTH_FRAMES)}")
-
-
 FIRST_CAPACITY = 64
 TABLE_CHUNK_ROWS = 256
 """Rows per chunk of the meta and pair tables (one file each): a row write rewrites its
@@ -112,10 +106,15 @@ frame in 0.5 ms where zstd takes 1.6-2.0 and encodes it in 0.9-1.3 ms where zstd
 DEFAULT_CODEC = "lz4"
 
 
-def check_codec(codec: str) -> None:
-    """FieldError (``codec``) unless it is one of :data:`CODECS`."""
-    if codec not in CODECS:
-        raise FieldError("codec", f"expected one of {', '.join(CODECS)}")
+def check_storage(depth_frames: str, codec: str) -> None:
+    """FieldError (``depth_frames`` or ``codec``) for a way of storing that a recording does
+    not offer (:data:`DEPTH_FRAMES`, :data:`CODECS`)."""
+    for field, value, choices in (
+        ("depth_frames", depth_frames, DEPTH_FRAMES),
+        ("codec", codec, tuple(CODECS)),
+    ):
+        if value not in choices:
+            raise FieldError(field, f"expected one of {', '.join(choices)}")
 
 
 def compressors(codec: str = DEFAULT_CODEC) -> list[Any]:

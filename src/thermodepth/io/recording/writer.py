@@ -26,9 +26,8 @@ from .format import (
     PAIR_COLUMNS,
     THERMAL_META,
     VERSION,
-    check_codec,
-    check_depth_frames,
     check_output,
+    check_storage,
     checksum,
     create_array,
     grow,
@@ -145,8 +144,7 @@ class RecordingWriter:
         depth_frames: str = "all",
         codec: str = DEFAULT_CODEC,
     ) -> None:
-        check_depth_frames(depth_frames)
-        check_codec(codec)
+        check_storage(depth_frames, codec)
         self.depth_frames = depth_frames
         self.path = check_output(path, overwrite, inputs)
         try:
