@@ -50,7 +50,8 @@ VERSION = 2
 """The version recordings are written in. Version 2 stores the pixels' CRC-32C where version
 1 stored zlib's CRC-32 (1.6-2.8x slower to check on a depth frame, measured); both are
 read."""
-VERSIONS = (1, 2)
+VERSIONS = {1: "CRC-32", 2: "CRC-32C"}
+"""The versions read, each with the name of the pixels' checksum it stores (:func:`checksum`)."""
 DEPTH_META = ("time_s", "index", "crc32c")
 THERMAL_META = (
     "time_s",

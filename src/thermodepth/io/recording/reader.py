@@ -258,8 +258,9 @@ class Recording:
         """The frame at ``row`` from its meta row and arrays, checked against the checksum
         it holds; CorruptFrameError if they do not match."""
         if checksum(*arrays, version=self.version) != int(meta[2]):
-            name = "CRC-32C" if self.version > 1 else "CRC-32"
-            raise CorruptFrameError(f"{stream} frame {row}: pixels do not match their {name}")
+            raise CorruptFrameError(
+                f"{stream} frame {row}: pixels do not match their {VERSIONS[self.version]}"
+            )
         if stream == "depth":
             ir = arrays[1] if self.with_ir else None
             return DepthFrame(arrays[0], float(meta[0]), int(meta[1]), ir)
