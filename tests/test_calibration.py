@@ -15,6 +15,7 @@ import yaml
 from thermodepth.calibration import Calibration
 from thermodepth.camera import rotation_from_euler
 from thermodepth.errors import InputError
+from thermodepth.radiometry import ThermalOutput
 
 EXAMPLE = Path(__file__).parents[1] / "examples" / "calibration.yaml"
 
@@ -108,6 +109,20 @@ BAD_CASES = [
     ("depth.cy", -3.0, "depth: cy=-3.0 is outside the image (height 720)"),
     ("thermal.fxx", 1.0, "thermal.fxx: unknown key"),
     ("depth.width", "wide", "depth.width: Input should be a valid integer"),
+    ("thermal.output", {"kind": "celsius"}, "thermal.output.kind: Input should be 'counts' or"),
+    ("thermal.output", {"kind": "kelvin"}, "thermal.output: a kelvin output needs scale_k"),
+    (
+        "thermal.output",
+        {"kind": "kelvin", "scale_k": 0.0},
+        "thermal.output.scale_k: Input should be greater than 0",
+    ),
+    (
+        "thermal.output",
+        {"kind": "counts", "scale_k": 0.01},
+        "thermal.output: scale_k and offset_k are for kind: kelvin",
+    ),
+    ("thermal.output", {"kind": "kelvin", "scale_k": 0.01, "bits": 16}, "thermal.output: bits"),
+    ("thermal.output", {"kind": "counts", "gain": 1}, "thermal.output.gain: unknown key"),
 ]
 
 
@@ -131,6 +146,33 @@ def test_bad_file_names_file_and_field(
     text = str(info.value)
     assert text.startswith(f"{path}: {message}")
     assert "\n" not in text
+
+
+@pytest.mark.parametrize(
+    ("section", "want"),
+    [
+        (None, ThermalOutput()),  # files written before thermal.output: raw 14-bit counts
+        ({"kind": "counts"}, ThermalOutput()),
+        ({"kind": "counts", "bits": 16}, ThermalOutput(bits=16)),
+        ({"kind": "kelvin", "scale_k": 0.01}, ThermalOutput.kelvin_per(0.01)),
+        ({"kind": "kelvin", "scale_k": 0.015625, "offset_k": 0}, ThermalOutput.kelvin_per(1 / 64)),
+        (
+            {"kind": "kelvin", "scale_k": 0.1, "offset_k": 273.15},
+            ThermalOutput.kelvin_per(0.1, 273.15),
+        ),
+    ],
+)
+def test_thermal_output_is_read_and_written(
+    tmp_path: Path, section: dict[str, Any] | None, want: ThermalOutput
+) -> None:
+    data = valid_dict() if section is None else _set(valid_dict(), "thermal.output", section)
+    path = tmp_path / "calib.yaml"
+    path.write_text(yaml.safe_dump(data))
+    cal = Calibration.load(path)
+    assert cal.thermal_output == want
+    cal.save(path)  # written with the keys other tools write: kind, scale_k, offset_k
+    assert yaml.safe_load(path.read_text())["thermal"]["output"] == want.as_dict()
+    assert Calibration.load(path).thermal_output == want
 
 
 def test_rotation_within_tolerance_is_accepted() -> None:

@@ -234,8 +234,11 @@ def test_roi_statistics_are_those_of_the_whole_mask(method: str, interpolation: 
 
 def test_shutter_frame_and_bad_counts_keep_the_stream_going() -> None:
     rig = inspection_rig(1.0)
+    told: list[str] = []
     pipe = Pipeline(
-        Settings(rois=[RoiSettings(name="all", rect=(0, 0, 1280, 720))]), rig.calibration
+        Settings(rois=[RoiSettings(name="all", rect=(0, 0, 1280, 720))]),
+        rig.calibration,
+        warn=told.append,
     )
     pair = rig.frame()
     shut = replace(pair, telemetry=replace(pair.telemetry, ffc_state=2))
@@ -245,6 +248,10 @@ def test_shutter_frame_and_bad_counts_keep_the_stream_going() -> None:
     bad = replace(pair, thermal=np.full((120, 160), 65535, np.uint16))  # above 14 bits
     f = pipe.process(bad)
     assert np.isnan(f.temp_thermal_c).all() and np.all(f.flags_thermal & PixelFlag.BAD_COUNTS)
+    # a whole frame beyond the stated kind is told once, in one line naming the frame
+    pipe.process(bad)
+    assert len(told) == 1 and told[0].startswith(f"frame {pair.index}: the thermal values")
+    assert "beyond the 14-bit range" in told[0]
     assert np.isnan(f.temp_depth_c).all()
     assert f.rois[0].n == 0 and f.rois[0].flags & PixelFlag.BAD_COUNTS  # says why it is empty
     good = pipe.process(rig.frame())
@@ -279,9 +286,12 @@ def test_calibration_that_does_not_match_the_frames() -> None:
         match="frame 7: the depth image is 640x480 but the calibration's depth camera is 1280x720",
     ):
         Pipeline(Settings(), rig.calibration).process(small)
+    # raw counts whose telemetry says TLinear (kelvin x 100): no temperature, told in one line
     kelvin = replace(pair, telemetry=replace(pair.telemetry, tlinear=True))
-    with pytest.raises(InputError, match=r"the thermal pixels are TLinear kelvin, not the raw"):
-        Pipeline(Settings(), rig.calibration).process(kelvin)
+    told: list[str] = []
+    f = Pipeline(Settings(), rig.calibration, warn=told.append).process(kelvin)
+    assert np.all(f.flags_thermal & PixelFlag.BAD_COUNTS) and not f.hotspots
+    assert len(told) == 1 and "read as kelvin x 100 give a median of 8" in told[0]
 
 
 @pytest.mark.parametrize(

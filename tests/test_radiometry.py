@@ -8,6 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
+from thermodepth.conditions import Conditions, Radiometry
 from thermodepth.radiometry import (
     PAPER_2022,
     STEFAN_BOLTZMANN,
@@ -15,6 +16,7 @@ from thermodepth.radiometry import (
     PlanckConstants,
     RadiometryParams,
     SpectralResponse,
+    ThermalOutput,
     atmospheric_transmission,
     band_radiance,
     celsius_to_raw,
@@ -284,3 +286,74 @@ def test_inverse_of_inverse(temp_c: float, e: float, d: float, method: str) -> N
     assert raw_to_celsius(celsius_to_raw(temp_c, p, method), p, method) == pytest.approx(
         temp_c, abs=1e-7
     )
+
+
+# --- A camera's own temperature output (thermal.output kind: kelvin) ------------------------
+
+LEPTON_TLINEAR = ThermalOutput.kelvin_per(0.01)
+P2PRO = ThermalOutput.kelvin_per(1 / 64)
+
+
+@given(
+    st.floats(230.0, 1000.0),
+    st.sampled_from([LEPTON_TLINEAR, P2PRO, ThermalOutput.kelvin_per(0.1, 50.0)]),
+    st.sampled_from(["flir", "thermimage"]),
+)
+def test_kelvin_reading_passes_unchanged_with_emissivity_1_and_no_air(
+    temp_k: float, output: ThermalOutput, method: str
+) -> None:
+    # The camera's reading is what it makes of a blackbody: with emissivity 1, no air and no
+    # window our radiometry must give the reading back, whatever the Planck constants.
+    values = (temp_k - output.offset_k) / output.scale_k
+    for planck in (PAPER_2022, SC660):
+        radiometry = Radiometry(Conditions(emissivity=1.0), planck, method, output)
+        assert radiometry.celsius(values, 0.0) == pytest.approx(temp_k - K0, abs=1e-9)
+
+
+@given(st.floats(-20, 400), st.floats(0.3, 1.0), st.floats(0, 10))
+def test_kelvin_output_round_trip(temp_c: float, e: float, d: float) -> None:
+    radiometry = Radiometry(Conditions(emissivity=e, ambient_temp_c=22.0), output=P2PRO)
+    values = radiometry.counts(temp_c, d)  # the camera's values (float) of the object
+    assert radiometry.celsius(values, d) == pytest.approx(temp_c, abs=1e-7)
+
+
+def test_kelvin_reading_corrected_like_counts() -> None:
+    # A camera reads the blackbody-equivalent of what reaches it: with emissivity 0.9 and
+    # 3 m of air a 60 C object reads cooler; its reading, as counts would be, is corrected
+    # back to 60 C, and both kinds give the same temperature to the reading's quantisation.
+    conditions = Conditions(emissivity=0.9, ambient_temp_c=20.0, humidity_pct=70.0)
+    counts = Radiometry(conditions).counts(60.0, 3.0)
+    apparent_k = kelvin_from_counts(counts, PAPER_2022)
+    assert apparent_k - K0 < 58.5  # what the camera itself says
+    values = np.round(apparent_k / 0.01)
+    got = Radiometry(conditions, output=LEPTON_TLINEAR).celsius(values, 3.0)
+    assert got == pytest.approx(60.0, abs=0.02)  # 0.01 K steps, gain ~1.1 through e, tau
+    assert got == pytest.approx(Radiometry(conditions).celsius(counts, 3.0), abs=0.02)
+
+
+def test_values_that_are_no_reading() -> None:
+    values = np.array([0.0, 1.0, 31215.0, 65535.0, np.nan, -5.0])
+    bad = LEPTON_TLINEAR.invalid(values)  # 0: no data; 0.01 K: no temperature; 655 K: fine
+    assert bad.tolist() == [True, True, False, False, True, True]
+    blackbody = Radiometry(Conditions(emissivity=1.0), output=LEPTON_TLINEAR)
+    assert blackbody.celsius(values)[2] == pytest.approx(39.0)
+    counts16 = ThermalOutput(bits=16)
+    assert counts16.invalid([16384.0, 65535.0, 65536.0]).tolist() == [False, False, True]
+    assert ThermalOutput().invalid([16383.0, 16384.0]).tolist() == [False, True]
+    with pytest.raises(ValueError, match="output kind 'celsius'"):
+        ThermalOutput("celsius")
+    with pytest.raises(ValueError, match="scale_k must be a finite number > 0"):
+        ThermalOutput.kelvin_per(0.0)
+
+
+def test_a_frame_of_another_kind_is_told() -> None:
+    counts = np.full((120, 160), 8000, np.uint16)  # a Lepton's raw counts
+    why = LEPTON_TLINEAR.problem(counts)
+    assert why is not None and "median of 80.0 K, which is no temperature" in why
+    assert ThermalOutput().problem(counts) is None
+    tlinear = np.full((120, 160), 31215, np.uint16)
+    assert LEPTON_TLINEAR.problem(tlinear) is None
+    why = ThermalOutput().problem(tlinear)
+    assert why is not None and "beyond the 14-bit range" in why
+    tlinear[:50] = 0  # fewer than half of the pixels bad: NaN per pixel, no line
+    assert LEPTON_TLINEAR.problem(tlinear) is None

@@ -3,13 +3,17 @@
 YAML or JSON (chosen by the file extension), validated on load::
 
     depth:   {width, height, fx, fy, cx, cy, distortion: [k1, k2, p1, p2, k3], depth_scale_m}
-    thermal: {width, height, fx, fy, cx, cy, distortion: [k1, k2, p1, p2, k3]}
+    thermal: {width, height, fx, fy, cx, cy, distortion: [k1, k2, p1, p2, k3],
+              output: {kind: counts} | {kind: kelvin, scale_k: S, offset_k: O}}
     thermal_from_depth: {rotation: [[r00, r01, r02], [r10, r11, r12], [r20, r21, r22]],
                          translation_m: [tx, ty, tz]}
 
 Pixels follow OpenCV conventions (pixel centres at integers); ``depth_scale_m`` converts the
 depth camera's integer units to metres (0.001 for a D435). ``thermal_from_depth`` maps a point
-in the depth camera's frame to the thermal camera's frame: p_t = R p_d + t.
+in the depth camera's frame to the thermal camera's frame: p_t = R p_d + t. ``thermal.output``
+says what the thermal camera's pixel values are (:class:`~thermodepth.radiometry.ThermalOutput`):
+raw counts (the default: files written without it mean this; ``bits`` 14 unless given) or the
+camera's own temperature, kelvin = value x scale_k + offset_k.
 
 A bad file raises :class:`~thermodepth.errors.InputError` with one line naming the file and
 the field, e.g. ``calib.yaml: thermal.fx: Input should be greater than or equal to 1 (got
@@ -29,6 +33,7 @@ from pydantic import Field, model_validator
 
 from .camera import Intrinsics, RigidTransform, is_rotation
 from .errors import InputError
+from .radiometry import RAW_COUNTS, ThermalOutput
 from .schema import Finite, StrictSchema, read_mapping, validated, write_mapping
 
 SCHEMA_VERSION: Literal[1] = 1
@@ -60,6 +65,37 @@ class DepthCameraSchema(CameraSchema):
     depth_scale_m: Finite = Field(gt=0)
 
 
+class OutputSchema(StrictSchema):
+    """``thermal.output``: ``{kind: counts}`` (``bits``: the ADC's, 14 unless given) or
+    ``{kind: kelvin, scale_k: S, offset_k: O}`` (kelvin = value x S + O)."""
+
+    kind: Literal["counts", "kelvin"] = "counts"
+    scale_k: Finite | None = Field(default=None, gt=0)
+    offset_k: Finite | None = None
+    bits: int | None = Field(default=None, ge=1, le=32)
+
+    @model_validator(mode="after")
+    def _keys_of_kind(self) -> OutputSchema:
+        if self.kind == "kelvin":
+            if self.scale_k is None:
+                raise ValueError("a kelvin output needs scale_k (kelvin per value, e.g. 0.01)")
+            if self.bits is not None:
+                raise ValueError("bits is for counts; a kelvin output has scale_k and offset_k")
+        elif self.scale_k is not None or self.offset_k is not None:
+            raise ValueError("scale_k and offset_k are for kind: kelvin; counts take only bits")
+        return self
+
+    def output(self) -> ThermalOutput:
+        if self.kind == "kelvin":
+            assert self.scale_k is not None
+            return ThermalOutput.kelvin_per(self.scale_k, self.offset_k or 0.0)
+        return ThermalOutput(bits=self.bits or 14)
+
+
+class ThermalCameraSchema(CameraSchema):
+    output: OutputSchema = OutputSchema()
+
+
 class TransformSchema(StrictSchema):
     rotation: list[list[Finite]] = Field(min_length=3, max_length=3)
     translation_m: list[Finite] = Field(min_length=3, max_length=3)
@@ -80,7 +116,7 @@ class TransformSchema(StrictSchema):
 
 class CalibrationSchema(StrictSchema):
     depth: DepthCameraSchema
-    thermal: CameraSchema
+    thermal: ThermalCameraSchema
     thermal_from_depth: TransformSchema
     # a file of another version would be read wrongly: refused, as model files are
     schema_version: Literal[1] = SCHEMA_VERSION
@@ -108,12 +144,14 @@ def camera_dict(intr: Intrinsics) -> dict[str, Any]:
 
 @dataclass(frozen=True, eq=False)
 class Calibration:
-    """Depth and thermal intrinsics, the depth unit, and ``thermal_from_depth``."""
+    """Depth and thermal intrinsics, the depth unit, ``thermal_from_depth`` and what the
+    thermal camera's pixel values are (``thermal_output``)."""
 
     depth: Intrinsics
     thermal: Intrinsics
     depth_scale_m: float
     thermal_from_depth: RigidTransform
+    thermal_output: ThermalOutput = RAW_COUNTS
 
     def __post_init__(self) -> None:
         t = self.thermal_from_depth
@@ -136,13 +174,14 @@ class Calibration:
                 "thermal",
                 "depth",
             ),
+            thermal_output=s.thermal.output.output(),
         )
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "schema_version": SCHEMA_VERSION,
             "depth": {**camera_dict(self.depth), "depth_scale_m": float(self.depth_scale_m)},
-            "thermal": camera_dict(self.thermal),
+            "thermal": {**camera_dict(self.thermal), "output": self.thermal_output.as_dict()},
             "thermal_from_depth": {
                 "rotation": self.thermal_from_depth.rotation.tolist(),
                 "translation_m": self.thermal_from_depth.translation_m.tolist(),

@@ -4,8 +4,9 @@ Each pair whose shutter is open gives one reading of the reference target
 (:mod:`thermodepth.target`): its mean apparent temperature (radiometry with the emissivity,
 no distance correction: the sweep CSV's ``measured_temp_c``), its distance (the median range
 from the thermal camera of the depth pixels that land on it, metres), the VOx (FPA)
-temperature from the telemetry and the mean raw counts. ``average`` readings in a row make one
-sweep row (``n``).
+temperature from the telemetry (empty when the camera tells none) and the mean raw pixel value
+(counts, or the camera's own kelvin units). ``average`` readings in a row make one sweep row
+(``n``).
 
 Only a target that holds still is read: a frame whose target moved since the previous frame
 (:data:`STILL_OVERLAP`, :data:`STILL_DISTANCE`) is not, unless the next frame finds it still
@@ -27,7 +28,7 @@ from numpy.typing import NDArray
 from .calibration import Calibration
 from .conditions import Conditions, Radiometry
 from .errors import InputError
-from .frames import FramePair, require_raw_counts
+from .frames import FramePair, thermal_output
 from .registration import DepthOnThermal, Registration
 from .sweep import COLUMNS
 from .target import TargetSpec, overlap
@@ -122,6 +123,7 @@ class SweepCollector:
         self._pending: Reading | None = None  # a reading waiting for the next frame
         self._place: _Seen | None = None  # where the target settled
         self._lost_at: int | None = None  # the frame it was lost in, until found
+        self._tells_vox: bool | None = None  # whether the camera tells its VOx temperature
         self.last_temp_c: FloatArray | None = None
 
     # -- per pair ---------------------------------------------------------------------------
@@ -132,16 +134,12 @@ class SweepCollector:
         if pair.telemetry.in_ffc:
             self.stats.ffc_pairs += 1
             return []
-        require_raw_counts(pair)
-        fpa_k = pair.telemetry.fpa_temp_k
-        if not VOX_LIMITS_K[0] < fpa_k < VOX_LIMITS_K[1]:
-            raise InputError(
-                f"{self.source}: frame {pair.index}: no VOx (FPA) temperature in the telemetry "
-                f"({fpa_k:g} K); a sweep needs the Lepton's telemetry: enable it and record again"
-            )
+        self._check_vox(pair)
         near = self.registration.depth_to_thermal(pair.depth)
         counts = pair.thermal.astype(np.float64)
-        temp = self.radiometry.celsius(counts)  # NaN where the counts are invalid
+        output = thermal_output(pair.telemetry, self.calibration.thermal_output)
+        # NaN where the values are invalid
+        temp = self.radiometry.with_output(output).celsius(counts)
         self.last_temp_c = temp
         mask = self.target.find(near.z_m, temp, self.reference_temp_c)
         distance = np.nan if mask is None else self._distance_m(pair.depth, temp, near, mask)
@@ -177,6 +175,26 @@ class SweepCollector:
                     rows += self.finish()
         self._pending = None
         return rows
+
+    def _check_vox(self, pair: FramePair) -> None:
+        """A camera tells its VOx (FPA) temperature in every frame, or in none (an InfiRay P2
+        Pro: the rows' vox_temp_c are then empty, said once); one that stops telling it, or
+        tells a value no working camera reports, stops the sweep with one line."""
+        fpa_k = pair.telemetry.fpa_temp_k
+        told = not np.isnan(fpa_k)
+        if self._tells_vox is None:
+            self._tells_vox = told
+            if not told:
+                self.say(
+                    f"frame {pair.index}: the camera tells no sensor (VOx) temperature: the "
+                    "rows' vox_temp_c are left empty (fit-compensation --method radiance fits "
+                    "them without it; the paper's method needs it)"
+                )
+        if told != self._tells_vox or (told and not VOX_LIMITS_K[0] < fpa_k < VOX_LIMITS_K[1]):
+            raise InputError(
+                f"{self.source}: frame {pair.index}: no VOx (FPA) temperature in the telemetry "
+                f"({fpa_k:g} K); a sweep needs the Lepton's telemetry: enable it and record again"
+            )
 
     def finish(self) -> list[dict[str, float]]:
         """The row of the readings not yet in one (none if there are none)."""

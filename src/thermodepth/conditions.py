@@ -22,13 +22,14 @@ from .radiometry import (
     MAX_DISTANCE_M,
     PAPER_2022,
     RADIOMETRY_METHODS,
+    RAW_COUNTS,
     TEMP_LIMITS_C,
     ObjectParams,
     PlanckConstants,
     RadiometryParams,
+    ThermalOutput,
     celsius_to_kelvin,
     celsius_to_raw,
-    invalid_counts,
     raw_to_celsius,
 )
 from .schema import StrictSchema
@@ -154,21 +155,18 @@ class Conditions:
         return out
 
 
-_COUNT_LIMITS = RadiometryParams()
-"""The 14-bit range of counts (what :func:`invalid_counts` reads), made once: the default
-object parameters' checks cost more than the test itself, on every frame."""
-
-
 @dataclass(frozen=True, eq=False)
 class Radiometry:
-    """How a camera's counts become temperatures: its Planck constants (the RBFO model, paper
-    eqs 17-19), the radiometric model (a key of
+    """How a camera's pixel values become temperatures: what they are (``output``: raw
+    counts, or the camera's own kelvin; :class:`~thermodepth.radiometry.ThermalOutput`), its
+    Planck constants (the RBFO model, paper eqs 17-19), the radiometric model (a key of
     :data:`~thermodepth.radiometry.RADIOMETRY_METHODS`) and the viewing conditions.
     An unknown method raises :class:`~thermodepth.errors.FieldError` (``method``)."""
 
     conditions: Conditions = field(default_factory=Conditions)
     planck: PlanckConstants = PAPER_2022
     method: str = "flir"
+    output: ThermalOutput = RAW_COUNTS
 
     def __post_init__(self) -> None:
         if self.method not in RADIOMETRY_METHODS:
@@ -177,21 +175,35 @@ class Radiometry:
             )
 
     def params(self, distance_m: ArrayLike = 0.0) -> RadiometryParams:
-        """The radiometry's parameters at ``distance_m`` (metres, a number or a map)."""
-        return RadiometryParams(planck=self.planck, obj=self.conditions.object_params(distance_m))
+        """The radiometry's parameters at ``distance_m`` (metres, a number or a map); no limit
+        on the signal (:meth:`signal` has made invalid values NaN)."""
+        obj = self.conditions.object_params(distance_m)
+        return RadiometryParams(planck=self.planck, obj=obj, max_counts=None)
 
-    def celsius(self, counts: ArrayLike, distance_m: ArrayLike = 0.0) -> FloatArray:
-        """Object temperature (C) of raw counts seen from ``distance_m`` (NaN where the counts
-        are invalid: :func:`~thermodepth.radiometry.raw_to_kelvin`)."""
-        return raw_to_celsius(counts, self.params(distance_m), self.method)
+    def signal(self, values: ArrayLike) -> FloatArray:
+        """The signal (float counts of the RBFO form) of pixel values, NaN where they are
+        invalid (:meth:`~thermodepth.radiometry.ThermalOutput.signal`)."""
+        return self.output.signal(values, self.planck)
+
+    def celsius(self, values: ArrayLike, distance_m: ArrayLike = 0.0) -> FloatArray:
+        """Object temperature (C) of pixel values seen from ``distance_m`` (NaN where the
+        values are invalid: :meth:`invalid`)."""
+        return raw_to_celsius(self.signal(values), self.params(distance_m), self.method)
 
     def counts(self, temp_c: ArrayLike, distance_m: ArrayLike = 0.0) -> FloatArray:
-        """Raw counts (float) of an object at ``temp_c`` seen from ``distance_m``."""
-        return celsius_to_raw(temp_c, self.params(distance_m), self.method)
+        """Pixel values (float: counts, or the camera's kelvin units) of an object at
+        ``temp_c`` seen from ``distance_m``: the inverse of :meth:`celsius`."""
+        signal = celsius_to_raw(temp_c, self.params(distance_m), self.method)
+        return self.output.values(signal, self.planck)
 
-    def invalid(self, counts: ArrayLike) -> NDArray[np.bool_]:
-        """Counts no temperature can come from (NaN, negative, above the 14-bit range)."""
-        return invalid_counts(counts, _COUNT_LIMITS)
+    def invalid(self, values: ArrayLike) -> NDArray[np.bool_]:
+        """Values no temperature can come from (NaN; counts outside the ADC's range; a kelvin
+        reading that is no temperature)."""
+        return self.output.invalid(values)
+
+    def with_output(self, output: ThermalOutput) -> Radiometry:
+        """The same radiometry for pixel values of another kind."""
+        return self if output == self.output else replace(self, output=output)
 
 
 def _checked(name: str) -> AfterValidator:

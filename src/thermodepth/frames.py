@@ -2,7 +2,8 @@
 
 The simulated rig, real cameras and recordings all produce :class:`FramePair`, so nothing
 downstream knows where frames came from. Arrays are kept as the devices give them: depth in
-the depth camera's integer units (0 = invalid), thermal in raw 14-bit counts.
+the depth camera's integer units (0 = invalid), thermal as the camera's pixel values (raw
+counts, or its own temperature at a scale: :func:`thermal_output` says which).
 """
 
 from __future__ import annotations
@@ -13,8 +14,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InputError
-from .radiometry import ZERO_C_IN_K
+from .radiometry import ZERO_C_IN_K, ThermalOutput
 
 
 class FfcState(IntEnum):
@@ -31,10 +31,12 @@ class Telemetry:
     """Per-frame thermal camera telemetry (Lepton telemetry row A, SI units).
 
     frame_counter: the camera's frame count; fpa_temp_k: focal-plane (VOx) temperature, the
-    paper's "VOx temperature"; housing_temp_k: camera housing temperature; ffc_state: shutter
-    state; time_since_ffc_s: time since the last FFC (None if unknown); ffc_desired: the camera
-    asks for an FFC; tlinear / tlinear_resolution_k: TLinear output on (Lepton 3.5) and its
-    resolution (0.01 or 0.1 K).
+    paper's "VOx temperature" (NaN: the camera does not tell it); housing_temp_k: camera
+    housing temperature; ffc_state: shutter state; time_since_ffc_s: time since the last FFC
+    (None if unknown); ffc_desired: the camera asks for an FFC; tlinear /
+    tlinear_resolution_k: the pixels are the camera's own temperature, kelvin x
+    1 / resolution (a Lepton's TLinear at 0.01 or 0.1 K, an InfiRay P2 Pro's 1/64 K), not
+    raw counts.
     """
 
     frame_counter: int
@@ -61,7 +63,8 @@ class FramePair:
     """A depth frame and a thermal frame paired in time, with the thermal telemetry.
 
     depth: (H, W) uint16 depth-camera units (multiply by the calibration's depth_scale_m;
-    0 = invalid); thermal: (h, w) uint16 raw counts; depth_time_s / thermal_time_s: capture
+    0 = invalid); thermal: (h, w) uint16 pixel values (raw counts, or the camera's own
+    temperature: :func:`thermal_output`); depth_time_s / thermal_time_s: capture
     times in seconds on one clock; index: the pair's sequence number in its stream;
     ir: optional (H, W) uint8 infrared image of the depth camera.
     """
@@ -80,14 +83,13 @@ class FramePair:
         return self.depth_time_s - self.thermal_time_s
 
 
-def require_raw_counts(pair: FramePair) -> None:
-    """Refuse a pair whose thermal pixels are a Lepton 3.5's TLinear kelvin, not the raw
-    counts radiometry needs (a recording made with TLinear on): one InputError naming it."""
-    if pair.telemetry.tlinear:
-        raise InputError(
-            f"frame {pair.index}: the thermal pixels are TLinear kelvin, not the raw counts "
-            "the radiometry needs (record with TLinear off)"
-        )
+def thermal_output(telemetry: Telemetry, stated: ThermalOutput) -> ThermalOutput:
+    """What a frame's thermal pixel values are: the camera's own temperature when its
+    telemetry says so (``tlinear``: kelvin per value ``tlinear_resolution_k``, 0.01 if it does
+    not say), else what the calibration states (``thermal.output``)."""
+    if telemetry.tlinear:
+        return ThermalOutput.kelvin_per(telemetry.tlinear_resolution_k or 0.01)
+    return stated
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,9 +111,9 @@ class DepthFrame:
 class ThermalFrame:
     """One frame of the thermal camera's stream, before pairing.
 
-    counts: (h, w) uint16 raw counts; time_s: capture time in seconds (same clock as the
-    depth stream); index: the frame's number in its stream; telemetry: the frame's decoded
-    telemetry.
+    counts: (h, w) uint16 pixel values (raw counts, or the camera's own temperature:
+    :func:`thermal_output`); time_s: capture time in seconds (same clock as the depth stream);
+    index: the frame's number in its stream; telemetry: the frame's decoded telemetry.
     """
 
     counts: NDArray[np.uint16]

@@ -15,11 +15,20 @@ For every frame pair:
 One :class:`Settings` object (YAML) configures it all. Thermal pixels that no depth pixel
 reaches (beyond the depth camera's range, invalid depth) are computed at a fallback
 distance and flagged ``NO_DISTANCE``; a frame taken while the shutter is closed (FFC) is all
-NaN, flagged ``SHUTTER``; invalid counts give NaN flagged ``BAD_COUNTS``. The stream goes on.
+NaN, flagged ``SHUTTER``; invalid pixel values give NaN flagged ``BAD_COUNTS``; a frame without
+a sensor (VOx) temperature is compensated at the model's reference VOx temperature, flagged
+``NO_VOX``. The stream goes on.
+
+The thermal pixel values are what the frame's telemetry or the calibration says
+(:func:`~thermodepth.frames.thermal_output`): raw counts, or the camera's own temperature,
+which the radiometry turns into the same signal. A frame most of whose values cannot be of that
+kind (a kelvin output whose median is no temperature, counts beyond the ADC's range) is told in
+one warning line, the first time (it is NaN, flagged ``BAD_COUNTS``, as any bad value).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from enum import IntFlag
@@ -33,9 +42,9 @@ from pydantic import AfterValidator, Field, PrivateAttr, model_validator
 
 from .calibration import Calibration
 from .compensation import CompensationModel, Flag, NoCompensation, load_model
-from .conditions import ConditionsSchema
+from .conditions import ConditionsSchema, Radiometry
 from .errors import FieldError, InputError, repeated
-from .frames import FramePair, require_raw_counts
+from .frames import FramePair, thermal_output
 from .measure import (
     AlarmRule,
     AlarmTracker,
@@ -79,8 +88,9 @@ class PixelFlag(IntFlag):
     TEMPERATURE_OUTSIDE = Flag.TEMPERATURE_OUTSIDE
     INVALID = Flag.INVALID
     NO_DISTANCE = 16  # no depth pixel reaches it: computed at the fallback distance
-    BAD_COUNTS = 32  # NaN, negative or above the ADC range
+    BAD_COUNTS = 32  # no temperature from the value: NaN, beyond the ADC's range, no data
     SHUTTER = 64  # the frame shows the closed shutter (FFC), not the scene
+    NO_VOX = 128  # the camera told no sensor temperature: compensated at the model's reference
 
 
 # ---------------------------------------------------------------------------------------------
@@ -291,7 +301,7 @@ class FusedFrame:
     index: int
     depth_time_s: float
     thermal_time_s: float
-    vox_temp_c: float
+    vox_temp_c: float  # NaN: the camera told none (PixelFlag.NO_VOX)
     in_ffc: bool
     temp_thermal_c: FloatArray
     flags_thermal: NDArray[np.uint8]
@@ -363,6 +373,8 @@ class Pipeline:
     registration: one to share between pipelines of the same calibration and registration
     method (building one takes ~50 ms). model: the compensation model already loaded from
     ``settings.compensation`` (a batch ships it to workers that cannot read the file).
+    warn: where the one line about frames whose values are not of the stated kind goes
+    (default: Python's warnings).
     """
 
     def __init__(
@@ -371,8 +383,11 @@ class Pipeline:
         calibration: Calibration | None = None,
         registration: Registration | None = None,
         model: CompensationModel | None = None,
+        warn: Callable[[str], None] | None = None,
     ) -> None:
         self.settings = s = settings or Settings()
+        self.warn = warn or (lambda line: warnings.warn(line, stacklevel=3))
+        self._kind_told = False
         if calibration is None:
             if s.calibration is None:
                 raise InputError(
@@ -393,7 +408,8 @@ class Pipeline:
         self.model: CompensationModel = model
         r = s.radiometry
         try:
-            self.radiometry = self.model.radiometry(r.conditions(), r.constants(), r.method)
+            radiometry = self.model.radiometry(r.conditions(), r.constants(), r.method)
+            self.radiometry = radiometry.with_output(calibration.thermal_output)
         except FieldError as exc:
             raise InputError(f"{s.compensation}: {exc.message}") from None
         self.rois = [roi.roi() for roi in s.rois]
@@ -427,23 +443,49 @@ class Pipeline:
                     f"frame {pair.index}: the {name} image is {img.shape[1]}x{img.shape[0]} "
                     f"but the calibration's {name} camera is {intr.width}x{intr.height}"
                 )
-        require_raw_counts(pair)
+
+    def radiometry_of(self, pair: FramePair) -> Radiometry:
+        """The radiometry of a pair's thermal values (their kind: the telemetry's, else the
+        calibration's). The first frame most of whose values cannot be of that kind is told
+        through ``warn`` (ThermalOutput.problem)."""
+        output = thermal_output(pair.telemetry, self.calibration.thermal_output)
+        if not (self._kind_told or pair.telemetry.in_ffc):
+            why = output.problem(pair.thermal)
+            if why is not None:
+                self._kind_told = True
+                self.warn(
+                    f"frame {pair.index}: {why} (its pixels are NaN, flagged bad_counts; "
+                    "later such frames are not told)"
+                )
+        return self.radiometry.with_output(output)
 
     def temperatures(
-        self, counts: NDArray[np.generic], vox_c: float, distance_m: FloatArray
+        self,
+        values: NDArray[np.generic],
+        vox_c: float,
+        distance_m: FloatArray,
+        radiometry: Radiometry | None = None,
     ) -> tuple[FloatArray, NDArray[np.uint8]]:
-        """Temperature (C) and flags of thermal counts, at per-pixel distances (m): the
-        compensation model's (:meth:`~thermodepth.compensation.CompensationModel.from_counts`),
-        with invalid counts NaN and flagged ``BAD_COUNTS``."""
-        c = np.asarray(counts, dtype=np.float64)
-        temp, flags = self.model.from_counts(c, vox_c, distance_m, self.radiometry)
-        bad = self.radiometry.invalid(c)
-        flags = flags | np.where(bad, np.uint8(PixelFlag.BAD_COUNTS), np.uint8(0))
+        """Temperature (C) and flags of thermal pixel values (``radiometry``'s kind; None:
+        the calibration's), at per-pixel distances (m): the compensation model's
+        (:meth:`~thermodepth.compensation.CompensationModel.from_counts`), with invalid values
+        NaN and flagged ``BAD_COUNTS``. A NaN ``vox_c`` (no sensor temperature) is
+        compensated at the model's reference VOx temperature and flagged ``NO_VOX``."""
+        radiometry = radiometry or self.radiometry
+        c = np.asarray(values, dtype=np.float64)
+        extra = np.uint8(0)
+        reference = self.model.vox_reference_c
+        if not np.isfinite(vox_c) and reference is not None:
+            vox_c, extra = reference, np.uint8(PixelFlag.NO_VOX)
+        temp, flags = self.model.from_counts(c, vox_c, distance_m, radiometry)
+        bad = radiometry.invalid(c)
+        flags = flags | extra | np.where(bad, np.uint8(PixelFlag.BAD_COUNTS), np.uint8(0))
         return np.where(bad, np.nan, temp).astype(np.float32), flags.astype(np.uint8)
 
     def process(self, pair: FramePair) -> FusedFrame:
         """Fuse one frame pair (steps in the module docstring)."""
         self._check(pair)
+        radiometry = self.radiometry_of(pair)
         s = self.settings
         near = self.registration.depth_to_thermal(pair.depth)
         distance = near.range_m
@@ -459,7 +501,7 @@ class Pipeline:
             temp = np.full(pair.thermal.shape, np.nan, np.float32)
             flags = np.full(pair.thermal.shape, PixelFlag.SHUTTER, np.uint8)
         else:
-            temp, flags = self.temperatures(pair.thermal, vox_c, distance)
+            temp, flags = self.temperatures(pair.thermal, vox_c, distance, radiometry)
         flags |= np.where(missing, np.uint8(PixelFlag.NO_DISTANCE), np.uint8(0))
         sample_depth = partial(
             self.registration.thermal_to_depth,

@@ -213,6 +213,122 @@ def tlinear_to_celsius(values: ArrayLike, resolution_k: float = 0.01) -> FloatAr
 
 
 # ---------------------------------------------------------------------------------------------
+# What a thermal camera's pixel values are
+# ---------------------------------------------------------------------------------------------
+
+OUTPUT_KINDS = ("counts", "kelvin")
+
+#: Kelvin a camera's own temperature output may read (-100 .. 2000 C): beyond, a value is not
+#: a temperature (no data, or the output is not what the calibration says).
+KELVIN_LIMITS = (ZERO_C_IN_K - 100.0, ZERO_C_IN_K + 2000.0)
+
+
+@dataclass(frozen=True)
+class ThermalOutput:
+    """What a thermal camera's pixel values are (the calibration file's ``thermal.output``).
+
+    ``"counts"``: raw counts of the RBFO model (paper eqs 17-19), valid from 0 to
+    2^bits - 1 (a Lepton's 14 bits, a Boson's 16). ``"kelvin"``: the camera's own
+    blackbody-equivalent (apparent) temperature, kelvin = value x scale_k + offset_k
+    (Lepton TLinear: scale 0.01 or 0.1; InfiRay P2 Pro / Topdon TC001: 1/64; Boson TLinear:
+    0.01), read as the camera reads a blackbody: emissivity 1, no air.
+
+    Either becomes the signal S (counts of the RBFO form, linear in in-band radiance) by
+    :meth:`signal`: counts as they are, a kelvin reading T through S(T) = O + R / (exp(B / T)
+    - F) of the Planck constants in use; so emissivity, reflections, the air and the window
+    mix in it exactly as they do in counts, and with emissivity 1 and no air a kelvin reading
+    comes back unchanged.
+    """
+
+    kind: str = "counts"
+    scale_k: float = 1.0
+    offset_k: float = 0.0
+    bits: int = 14
+
+    def __post_init__(self) -> None:
+        if self.kind not in OUTPUT_KINDS:
+            raise ValueError(f"output kind {self.kind!r}: expected one of {OUTPUT_KINDS}")
+        if not (np.isfinite(self.scale_k) and self.scale_k > 0 and np.isfinite(self.offset_k)):
+            raise ValueError("scale_k must be a finite number > 0 and offset_k finite")
+        if not 1 <= self.bits <= 32:
+            raise ValueError(f"bits must be 1-32, got {self.bits}")
+
+    @classmethod
+    def kelvin_per(cls, scale_k: float, offset_k: float = 0.0) -> ThermalOutput:
+        """A kelvin output of ``scale_k`` kelvin per unit (and ``offset_k``)."""
+        return cls("kelvin", float(scale_k), float(offset_k))
+
+    @property
+    def is_kelvin(self) -> bool:
+        return self.kind == "kelvin"
+
+    @property
+    def max_counts(self) -> float:
+        """The largest valid count (counts kind)."""
+        return float(2**self.bits - 1)
+
+    def invalid(self, values: ArrayLike) -> NDArray[np.bool_]:
+        """Values no temperature can come from: NaN or infinite, and for counts negative or
+        above 2^bits - 1, for kelvin a reading outside :data:`KELVIN_LIMITS` (0: no data)."""
+        v = np.asarray(values, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            if self.is_kelvin:
+                k = v * self.scale_k + self.offset_k
+                return ~((k >= KELVIN_LIMITS[0]) & (k <= KELVIN_LIMITS[1]))
+            return ~((v >= 0) & (v <= self.max_counts))
+
+    def problem(self, values: ArrayLike) -> str | None:
+        """Why a frame's values cannot be of this kind, or None: more than half of them (every
+        4th pixel each way) invalid (:meth:`invalid`): the camera sends another kind, or
+        another scale, than the calibration says. A few bad pixels are not this."""
+        sample = np.asarray(values)[::4, ::4]
+        if np.count_nonzero(self.invalid(sample)) * 2 <= sample.size:
+            return None
+        median = float(np.median(sample))
+        if self.is_kelvin:
+            return (
+                f"the thermal values read as kelvin x {1 / self.scale_k:g} give a median of "
+                f"{median * self.scale_k + self.offset_k:.1f} K, which is no temperature: does "
+                "the camera send raw counts (thermal.output kind: counts), or another scale?"
+            )
+        return (
+            f"the thermal values (median {median:g}) are beyond the {self.bits}-bit range of "
+            "raw counts: does the camera send its own temperature (thermal.output kind: "
+            "kelvin, with its scale_k), or more bits (bits: 16)?"
+        )
+
+    def kelvin(self, values: ArrayLike) -> FloatArray:
+        """The camera's own reading in kelvin (kelvin kind), NaN where :meth:`invalid`."""
+        v = np.asarray(values, dtype=np.float64)
+        return np.where(self.invalid(v), np.nan, v * self.scale_k + self.offset_k)
+
+    def signal(self, values: ArrayLike, planck: PlanckConstants) -> FloatArray:
+        """The signal S (float counts of the RBFO form) of pixel values; NaN where
+        :meth:`invalid`."""
+        if self.is_kelvin:
+            return counts_from_kelvin(self.kelvin(values), planck)
+        v = np.asarray(values, dtype=np.float64)
+        return np.where(self.invalid(v), np.nan, v)
+
+    def values(self, signal: ArrayLike, planck: PlanckConstants) -> FloatArray:
+        """Pixel values (float, unrounded) of a signal: the inverse of :meth:`signal`."""
+        s = np.asarray(signal, dtype=np.float64)
+        if self.is_kelvin:
+            return (kelvin_from_counts(s, planck) - self.offset_k) / self.scale_k
+        return s
+
+    def as_dict(self) -> dict[str, float | int | str]:
+        """The mapping a calibration file holds (``thermal.output``)."""
+        if self.is_kelvin:
+            return {"kind": "kelvin", "scale_k": self.scale_k, "offset_k": self.offset_k}
+        return {"kind": "counts"} if self.bits == 14 else {"kind": "counts", "bits": self.bits}
+
+
+RAW_COUNTS = ThermalOutput()
+"""A Lepton 3's raw 14-bit counts: what a calibration file without ``thermal.output`` means."""
+
+
+# ---------------------------------------------------------------------------------------------
 # Atmosphere (FLIR's model, as published with Thermimage)
 # ---------------------------------------------------------------------------------------------
 

@@ -9,14 +9,16 @@ edge as users write them:
 column              required  meaning
 ==================  ========  =================================================================
 distance_m          yes       distance from the camera to the target, metres
-vox_temp_c          yes       the thermal camera's FPA (VOx) temperature, C
+vox_temp_c          yes       the thermal camera's FPA (VOx) temperature, C (empty: the
+                              camera tells none, as an InfiRay P2 Pro)
 measured_temp_c     yes       uncompensated reading of the target (ROI mean), C: radiometry
                               with emissivity, without distance correction
 reference_temp_c    yes*      the target's true temperature (contact sensor), C
 ambient_temp_c      no        air / surroundings temperature, C
 humidity_pct        no        relative humidity, percent
 emissivity          no        target emissivity used for measured_temp_c
-raw_counts          no        mean raw counts of the ROI
+raw_counts          no        mean raw pixel value of the ROI (counts, or the camera's
+                              own kelvin units)
 n                   no        number of readings averaged into the row (default 1)
 ==================  ========  =================================================================
 
@@ -134,7 +136,8 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
     and column: an empty file, missing columns (all named), a value that is not a number or
     that its column cannot hold (a temperature at or below absolute zero or above 5000 C, a
     distance beyond 1000 m, humidity outside 0-100 %, emissivity outside (0, 1], n not a
-    whole number >= 1). Known columns must be numeric; others are kept as text.
+    whole number >= 1). Known columns must be numeric (an empty vox_temp_c reads as NaN: a
+    camera that tells no sensor temperature); others are kept as text.
     """
     p = Path(path)
     text = read_text(p, "utf-8-sig")
@@ -164,6 +167,9 @@ def read_sweep_csv(path: str | Path, required: Sequence[str] = REQUIRED) -> Swee
             raise InputError(f"{p}: line {line}: {len(row)} fields, header has {len(header)}")
         for name, cell in zip(header, row, strict=True):
             if name in values:
+                if name == "vox_temp_c" and not cell.strip():  # the camera told none
+                    values[name].append(math.nan)
+                    continue
                 value = _number(cell, p, line, name)
                 why = _out_of_range(name, value)
                 if why:

@@ -153,7 +153,7 @@ def run(options: RunOptions, sinks: Sequence[Sink] = (), warn: Warn | None = Non
     )
     try:
         # the source's calibration, else the settings'; Pipeline refuses when neither has one
-        pipeline = Pipeline(settings, src.calibration or cal)
+        pipeline = Pipeline(settings, src.calibration or cal, warn=warn)
         recorded = provenance(options.settings, settings)
     except BaseException:
         src.close()

@@ -13,7 +13,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..board import BoardSpec
-from ..calibration import Calibration, CameraSchema, DepthCameraSchema, intrinsics_of
+from ..calibration import (
+    Calibration,
+    CameraSchema,
+    DepthCameraSchema,
+    ThermalCameraSchema,
+    intrinsics_of,
+)
 from ..camera import Intrinsics
 from ..errors import FieldError, InputError
 from ..progress import Progress
@@ -182,7 +188,11 @@ def load_intrinsics(path: str | Path, camera: str) -> tuple[Intrinsics, float | 
     data = read_mapping(path)
     nested = isinstance(data.get(camera), dict)
     section = data[camera] if nested else data
-    schema = DepthCameraSchema if "depth_scale_m" in section else CameraSchema
+    schema: type[CameraSchema] = CameraSchema
+    if "depth_scale_m" in section:
+        schema = DepthCameraSchema
+    elif camera == "thermal":  # a calibration file's thermal section may say its output
+        schema = ThermalCameraSchema
     cam = validated(schema, section, str(path), f"{camera}." if nested else "")
     return intrinsics_of(cam), getattr(cam, "depth_scale_m", None)
 

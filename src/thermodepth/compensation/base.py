@@ -50,6 +50,13 @@ class CompensationModel(Protocol):
         """The conditions readings are taken under when they leave them out."""
         ...
 
+    @property
+    def vox_reference_c(self) -> float | None:
+        """The VOx temperature (C) a reading without one is compensated at (a camera that
+        does not tell its sensor temperature): the middle of the range the model was fitted
+        over; None when the model does not use the VOx temperature."""
+        ...
+
     def radiometry(
         self, conditions: Conditions, planck: PlanckConstants | None, method: str
     ) -> Radiometry:
@@ -61,7 +68,8 @@ class CompensationModel(Protocol):
     def from_counts(
         self, counts: ArrayLike, vox_c: ArrayLike, distance_m: ArrayLike, radiometry: Radiometry
     ) -> Compensated:
-        """True temperature of raw counts (the pipeline's path)."""
+        """True temperature of a camera's pixel values (the pipeline's path): raw counts, or
+        the camera's own temperature, as ``radiometry.output`` says."""
         ...
 
     def apply(

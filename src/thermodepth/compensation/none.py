@@ -26,6 +26,8 @@ class NoCompensation:
     planck: PlanckConstants = PAPER_2022
     conditions: Conditions = field(default_factory=Conditions)
     method: ClassVar[str] = "none"
+    #: the VOx temperature does not enter
+    vox_reference_c: ClassVar[float | None] = None
 
     @classmethod
     def fit(

@@ -66,6 +66,13 @@ class PaperModel:
         rows = table.select(table["reference_temp_c"] == ref)
         x, y = rows["vox_temp_c"], rows["measured_temp_c"]
         weights = rows.get("n", 1.0)
+        if np.isnan(x).any():
+            line = line_of(rows, int(np.argmax(np.isnan(x))))
+            raise InputError(
+                f"{table.source}: {line}no vox_temp_c: the paper's eq. 20 is a line in ln(VOx) "
+                "and cannot be fitted on readings of a camera that tells no sensor temperature "
+                "(use --method radiance)"
+            )
         if np.any(x <= 0):
             line = line_of(rows, int(np.argmax(x <= 0)))
             raise InputError(
@@ -168,6 +175,10 @@ class PaperModel:
         """The reading of the counts without distance correction (as the paper reads them),
         then eq. 20 at each pixel's distance."""
         return self.apply(radiometry.celsius(counts), vox_c, distance_m)
+
+    @property
+    def vox_reference_c(self) -> float | None:
+        return 0.5 * (self.vox_range_c[0] + self.vox_range_c[1])
 
     def summary(self) -> list[str]:
         d = self.distances_m

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import AfterValidator, Field
 
 from ..conditions import Conditions, ConditionsSchema, Radiometry
-from ..errors import FieldError
+from ..errors import FieldError, InputError
 from ..radiometry import (
     PAPER_2022,
     PlanckConstants,
@@ -37,6 +37,7 @@ from .base import (
     apply_to_table,
     check_sweep,
     invalid_flag,
+    line_of,
     range_flag,
     table_conditions,
 )
@@ -55,7 +56,8 @@ class RadianceModel:
 
     planck: the camera's counts calibration; conditions: those of readings that leave them
     out (air temperature, humidity, emissivity); fitted ranges (for flags) of distance, VOx
-    and target temperature; cv: the cross-validation that chose the degrees.
+    (None: fitted on a camera that tells no VOx temperature, g and h then constants) and
+    target temperature; cv: the cross-validation that chose the degrees.
     """
 
     planck: PlanckConstants
@@ -65,7 +67,7 @@ class RadianceModel:
     vox_scale_c: float
     conditions: Conditions
     distance_range_m: tuple[float, float]
-    vox_range_c: tuple[float, float]
+    vox_range_c: tuple[float, float] | None
     temp_range_c: tuple[float, float]
     cv: dict[str, Any] = field(default_factory=dict)
     method: ClassVar[str] = "radiance"
@@ -127,10 +129,11 @@ class RadianceModel:
         lo, hi = self.temp_range_c
         flag = (
             range_flag(distance_m, *self.distance_range_m, 0.25, Flag.DISTANCE_OUTSIDE)
-            | range_flag(vox_c, *self.vox_range_c, 3.0, Flag.VOX_OUTSIDE)
             | range_flag(temp, lo, hi, max(10.0, 0.5 * (hi - lo)), Flag.TEMPERATURE_OUTSIDE)
             | invalid_flag(temp)
         )
+        if self.vox_range_c is not None:
+            flag = flag | range_flag(vox_c, *self.vox_range_c, 3.0, Flag.VOX_OUTSIDE)
         return Compensated(temp, np.broadcast_to(flag, temp.shape).astype(np.uint8))
 
     def apply(
@@ -162,19 +165,37 @@ class RadianceModel:
     def from_counts(
         self, counts: ArrayLike, vox_c: ArrayLike, distance_m: ArrayLike, radiometry: Radiometry
     ) -> Compensated:
-        return self.apply_counts(counts, vox_c, distance_m, radiometry.conditions)
+        """The values' signal (raw counts as they are, a kelvin output through the model's
+        Planck constants), then :meth:`apply_counts`."""
+        return self.apply_counts(
+            radiometry.signal(counts), vox_c, distance_m, radiometry.conditions
+        )
+
+    @property
+    def vox_reference_c(self) -> float | None:
+        return None if self.vox_range_c is None else self.vox_centre_c
 
     def summary(self) -> list[str]:
         cv = self.cv
         scored = any(v is not None for v in cv.get("rmse_c", {}).values())
-        (d0, d1), (v0, v1) = self.distance_range_m, self.vox_range_c
+        d0, d1 = self.distance_range_m
+        if self.vox_range_c is None:
+            fitted = (
+                f"fitted over {d0:.3g}-{d1:.3g} m without a VOx temperature (the camera tells "
+                "none): the sensor's gain and offset are constants; readings beyond are flagged"
+            )
+        else:
+            v0, v1 = self.vox_range_c
+            fitted = (
+                f"fitted over {d0:.3g}-{d1:.3g} m and VOx {v0:.3g}-{v1:.3g} C; readings beyond "
+                "are flagged"
+            )
         return [
             f"degrees chosen by cross-validation: {cv.get('degrees')}"
             if scored
             else f"degrees {cv.get('degrees')}: the simplest, as nothing can be held out "
             "(one distance and one target)",
-            f"fitted over {d0:.3g}-{d1:.3g} m and VOx {v0:.3g}-{v1:.3g} C; readings beyond "
-            "are flagged",
+            fitted,
         ] + (
             [
                 f"one target temperature ({self.temp_range_c[0]:g} C): the VOx effect is "
@@ -206,6 +227,15 @@ class RadianceModel:
             )
         conditions = conditions or Conditions()
         check_sweep(table)
+        x = table["vox_temp_c"]
+        no_vox = np.isnan(x)
+        if no_vox.any() and not no_vox.all():
+            raise InputError(
+                f"{table.source}: {line_of(table, int(np.argmax(no_vox)))}no vox_temp_c, where "
+                "other rows have one: fit the readings of one camera at a time"
+            )
+        if no_vox.all():  # a camera that tells no sensor temperature: g and h constants
+            max_degree = 0
         data = _Design.build(table, conditions, planck)
         # one target temperature cannot tell a gain from an offset: the VOx effect is then
         # fitted as a gain with the offset held at 0 (docs/compensation.md says why)
@@ -217,7 +247,7 @@ class RadianceModel:
         ]
         chosen, scores = choose_degrees(data, candidates, offset_held)
         gain, offset = data.solve(*chosen, offset_held)
-        x, ref = table["vox_temp_c"], table["reference_temp_c"]
+        ref = table["reference_temp_c"]
         return cls(
             planck,
             tuple(gain),
@@ -226,7 +256,7 @@ class RadianceModel:
             data.scale,
             conditions,
             (float(table["distance_m"].min()), float(table["distance_m"].max())),
-            (float(x.min()), float(x.max())),
+            None if no_vox.all() else (float(x.min()), float(x.max())),
             (float(ref.min()), float(ref.max())),
             {
                 "degrees": {"gain": chosen[0], "offset": chosen[1]},
@@ -249,7 +279,7 @@ class RadianceModel:
             "vox_scale_c": self.vox_scale_c,
             "conditions": self.conditions.as_dict(),
             "distance_range_m": list(self.distance_range_m),
-            "vox_range_c": list(self.vox_range_c),
+            "vox_range_c": None if self.vox_range_c is None else list(self.vox_range_c),
             "temp_range_c": list(self.temp_range_c),
             "cv": self.cv,
         }
@@ -267,7 +297,7 @@ class RadianceModel:
             p.vox_scale_c,
             p.conditions.conditions(),
             (p.distance_range_m[0], p.distance_range_m[1]),
-            (p.vox_range_c[0], p.vox_range_c[1]),
+            None if p.vox_range_c is None else (p.vox_range_c[0], p.vox_range_c[1]),
             (p.temp_range_c[0], p.temp_range_c[1]),
             p.cv,
         )
@@ -297,8 +327,11 @@ class _Design:
         atd = at0.with_object(distance_m=table["distance_m"])
         w_ap = celsius_to_raw(table["reference_temp_c"], atd) - planck.O
         x = table["vox_temp_c"]
-        centre = float((x.min() + x.max()) / 2)
-        scale = float(max((x.max() - x.min()) / 2, 1.0))
+        if np.isnan(x).all():  # no VOx temperature: only its zeroth power is used
+            centre, scale = 0.0, 1.0
+        else:
+            centre = float((x.min() + x.max()) / 2)
+            scale = float(max((x.max() - x.min()) / 2, 1.0))
         weight = table.get("n", 1.0) / slope**2
         return cls(w_meas, w_ap, weight, centre, scale, table, cond, planck)
 
@@ -387,6 +420,6 @@ class RadianceSchema(StrictSchema):
     vox_scale_c: float = Field(gt=0)
     conditions: ConditionsSchema
     distance_range_m: Range
-    vox_range_c: Range
+    vox_range_c: Range | None = None
     temp_range_c: Range
     cv: dict[str, Any] = Field(default_factory=dict)
