@@ -157,32 +157,42 @@ def test_describe_devices_says_clearly_when_nothing_is_attached() -> None:
     lines = describe_devices(
         {
             "realsense": [],
-            "purethermal": [],
-            "video": [{"index": 0, "name": "Integrated Camera", "purethermal": False}],
+            "thermal": [],
+            "video": [{"index": 0, "name": "Integrated Camera", "kind": None}],
         }
     )
     assert lines == [
         "no RealSense device found",
-        "no PureThermal (Lepton) found; other video devices: /dev/video0 (Integrated Camera)",
+        "no thermal camera found (PureThermal Lepton, InfiRay P2 Pro / Topdon TC001, FLIR "
+        "Boson); other video devices: /dev/video0 (Integrated Camera)",
+    ]
+    thermal = [
+        {"index": 2, "name": "PureThermal (fw:v1.3.0)", "kind": "lepton"},
+        {"index": 4, "name": "USB Camera", "kind": "p2pro"},
+        {"index": 6, "name": "Boson: FLIR Video", "kind": "boson"},
     ]
     found = describe_devices(
         {
             "realsense": [
                 {"name": "Intel RealSense D435", "serial": "123", "firmware": "5.16", "usb": "3.2"}
             ],
-            "purethermal": [{"index": 2, "name": "PureThermal (fw:v1.3.0)", "purethermal": True}],
-            "video": [],
+            "thermal": thermal,
+            "video": thermal,
         }
     )
     assert found[0].endswith("-> --source realsense:123")
-    assert found[1].endswith("-> --source lepton:2")
+    assert found[1].startswith("PureThermal (Lepton) /dev/video2")
+    assert found[1].endswith("-> --source lepton:2 (with a depth camera: realsense+lepton:2)")
+    assert found[2].startswith("InfiRay P2 Pro / Topdon TC001 /dev/video4")
+    assert found[2].endswith("-> --source p2pro:4 (with a depth camera: realsense+p2pro:4)")
+    assert found[3].endswith("-> --source boson:6 (with a depth camera: realsense+boson:6)")
 
 
 def test_devices_command_runs() -> None:
     result = runner.invoke(app, ["devices", "--json"])
     assert result.exit_code == 0, result.output
     listed = json.loads(result.output)
-    assert set(listed) == {"realsense", "realsense_unavailable", "purethermal", "video"}
+    assert set(listed) == {"realsense", "realsense_unavailable", "thermal", "video"}
 
 
 def test_devices_says_why_realsense_cannot_be_listed(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -223,14 +223,28 @@ def test_file_without_depth_is_refused(tmp_path: Path, sim_depth_frames) -> None
         RealSenseCamera(path=path)
 
 
-def test_file_with_the_wrong_depth_size_says_what_was_expected(tmp_path: Path) -> None:
-    frames = [DepthFrame(np.full((480, 640), 7, np.uint16), 1.0, 1)]
-    path = write_realsense_file(tmp_path / "vga", frames, size=(640, 480))
+def test_a_file_of_any_depth_mode_plays_in_its_own(tmp_path: Path) -> None:
+    # 848x480, Intel's recommended mode, at 0.1 mm units (as a D405 counts): the mode and the
+    # unit are the file's, never assumed
+    frames = [
+        DepthFrame(np.full((480, 848), 7000 + i, np.uint16), 1.0 + i / 30, i) for i in range(3)
+    ]
+    path = write_realsense_file(tmp_path / "d405", frames, size=(848, 480))
+    cam = RealSenseCamera(path=path)
+    try:
+        got = list(cam)
+    finally:
+        cam.close()
+    assert cam.mode == (848, 480, 30) and cam.settings["depth"] == "848x480 Z16 at 30 fps"
+    assert cam.depth_scale_m == pytest.approx(DEPTH_UNIT_M)
+    assert (cam.device_depth["width"], cam.device_depth["height"]) == (848, 480)
+    assert [int(f.depth[0, 0]) for f in got] == [7000, 7001, 7002]
+    # a mode asked for that the file does not hold is refused, naming both
     with pytest.raises(
         InputError,
-        match=re.escape(f"{path}: expected depth 1280x720 Z16, found Depth 640x480 Z16 at 30 fps"),
+        match=re.escape(f"{path}: expected depth 1280x720 Z16, found Depth 848x480 Z16 at 30 fps"),
     ):
-        RealSenseCamera(path=path)
+        RealSenseCamera(path=path, mode=(1280, 720, 30))
 
 
 @pytest.mark.parametrize(

@@ -13,6 +13,7 @@ from thermodepth.calibration import Calibration
 from thermodepth.camera import Intrinsics, RigidTransform, rotation_from_euler
 from thermodepth.evaluation import registration_error
 from thermodepth.registration import Reason, Registration
+from thermodepth.registration.reproject import depth_pixel_spacing
 from thermodepth.sim import (
     DepthCameraModel,
     Rig,
@@ -65,6 +66,47 @@ def test_nearest_thermal_pixel_is_right_and_occlusion_flagged(box_m: float, wall
     assert (reason[occluded] == Reason.OCCLUDED).mean() >= 0.99
     # visible surfaces are almost never called hidden: only mixed pixels at the box's edge
     assert (reason[visible] == Reason.OCCLUDED).mean() < 0.005
+
+
+@pytest.mark.parametrize(
+    ("thermal", "depth", "spacing", "radius"),
+    [
+        ("lepton3", "1280x720", (0.22, 0.25), 0),
+        ("p2pro", "848x480", (0.55, 0.62), 0),
+        ("boson640", "1280x720", (1.04, 1.12), 1),
+        ("boson640", "848x480", (1.55, 1.7), 1),
+    ],
+)
+def test_finer_thermal_pixels_leave_no_hole_for_a_hidden_surface(
+    thermal: str, depth: str, spacing: tuple[float, float], radius: int
+) -> None:
+    # A Boson 640 beside a D435 at 848x480: neighbouring depth pixels land 1.6 thermal px
+    # apart, so a plain z-buffer leaves 61 % of the thermal pixels empty and the wall hidden
+    # behind a box at 0.7 m took the box's temperature through them (1608 of 2554 pixels,
+    # measured before the dilation). Each thermal pixel now takes the nearest surface within
+    # the spacing: none bleeds, and visible surfaces are not called hidden.
+    scene = occlusion_scene(box_distance_m=0.7, wall_distance_m=1.8)
+    rig = Rig.of_cameras(scene, IDENTITY, thermal, depth, seed=2)
+    reg = Registration(rig.calibration)
+    lo, hi = spacing
+    assert lo < depth_pixel_spacing(rig.calibration) < hi
+    assert reg.strategy.dilation == radius
+    frame, truth = rig.frame(), rig.truth()
+    th, tw = rig.calibration.thermal.shape
+    index = np.arange(th * tw, dtype=np.float32).reshape(th, tw)
+    got, reason = reg.thermal_to_depth(frame.depth, index)
+    box = np.array([r.name.startswith("box") for r in scene.rects])
+    thermal_sees_box = box[truth.thermal_rect].ravel()
+    valid = frame.depth > 0
+    wall = ~box[np.maximum(truth.depth_rect, 0)] & (truth.depth_rect >= 0) & valid
+    ok = wall & (reason == Reason.OK)
+    assert (truth.occluded_in_thermal & wall).sum() > 2000
+    assert thermal_sees_box[got[ok].astype(int)].sum() == 0
+    assert (reason[truth.occluded_in_thermal & valid] == Reason.OCCLUDED).mean() >= 0.98
+    assert (reason[truth.visible_in_thermal & valid] == Reason.OCCLUDED).mean() < 0.005
+    # the distance map has no holes inside surfaces either: only where no surface is seen
+    z_m = reg.depth_to_thermal(frame.depth).z_m
+    assert np.isnan(z_m).mean() < 0.05
 
 
 @pytest.mark.parametrize("distance_m", [0.5, 1.0, 2.0, 3.0])

@@ -16,17 +16,19 @@ import pytest
 
 from test_telemetry import telemetry_bytes, words_of
 from thermodepth.errors import FieldError, InputError, ThermodepthError
-from thermodepth.frames import DepthFrame, FfcState, Telemetry, ThermalFrame
+from thermodepth.frames import DepthFrame, FfcState, Telemetry, ThermalFrame, thermal_output
 from thermodepth.io.recording import Recording
+from thermodepth.radiometry import ThermalOutput
 from thermodepth.session import record_session
 from thermodepth.sim import default_calibration
-from thermodepth.sources import lepton as lepton_mod
 from thermodepth.sources import open_source, split_spec
 from thermodepth.sources import realsense as realsense_mod
+from thermodepth.sources import uvc as uvc_mod
 from thermodepth.sources.base import DeviceLostError
-from thermodepth.sources.lepton import LeptonCamera, list_purethermal, list_video_devices
+from thermodepth.sources.lepton import LeptonCamera
 from thermodepth.sources.paired import PairedSource
 from thermodepth.sources.realsense import RealSenseCamera
+from thermodepth.sources.uvc import device_index, list_purethermal, list_video_devices
 
 TEL = Telemetry(frame_counter=0, fpa_temp_k=305.0, housing_temp_k=304.0)
 
@@ -108,7 +110,7 @@ def lepton_frame(k: int, ffc_state: int = 3) -> np.ndarray:
 
 
 def use_capture(monkeypatch: pytest.MonkeyPatch, cap: FakeCapture) -> None:
-    monkeypatch.setattr(lepton_mod.cv2, "VideoCapture", lambda *a, **k: cap)
+    monkeypatch.setattr(uvc_mod.cv2, "VideoCapture", lambda *a, **k: cap)
 
 
 def test_paired_source_pairs_two_threaded_cameras() -> None:
@@ -247,18 +249,27 @@ def test_paired_source_counters_merge_both_cameras(monkeypatch: pytest.MonkeyPat
 @pytest.mark.parametrize(
     ("spec", "message"),
     [
-        ("webcam", "source: unknown 'webcam'; expected one of sim, realsense"),
+        ("webcam", "source: unknown 'webcam'; expected one of sim[:thermal=CAMERA,depth=WxH]"),
         (
             "lepton+realsense",
-            "source: cannot combine 'lepton+realsense'; expected realsense+lepton",
+            "source: cannot combine 'lepton+realsense'; expected a depth camera and a thermal "
+            "camera, DEPTH+THERMAL with DEPTH one of realsense and THERMAL one of lepton, "
+            "p2pro, boson",
         ),
-        ("sim:3", "source: 'sim' takes no argument"),
+        ("realsense+lepton+boson", "source: cannot combine 'realsense+lepton+boson'"),
+        ("sim:3", "source: sim:3: expected KEY=VALUE with KEY one of thermal, depth"),
+        ("sim:thermal=flir", "thermal_camera: unknown 'flir'; choose from lepton3, lepton3.5"),
+        ("sim:depth=1280x800", "depth_mode: '1280x800': the simulated D435 offers 1280x720"),
+        ("sim:depth=wide", "depth_mode: 'wide': expected WIDTHxHEIGHT[@FPS], e.g. 848x480@30"),
         ("recording:", "source: recording:PATH needs a path"),
-        ("lepton:abc", "lepton:abc: expected a video device number"),
+        ("folder:", "source: folder:PATH needs a path"),
+        ("folder:{tmp}/none", "{tmp}/none: no such folder"),
+        ("lepton:abc", "lepton:abc: expected a video device, N or /dev/videoN"),
+        ("boson:/dev/cam", "boson:/dev/cam: expected a video device, N or /dev/videoN"),
         (
             "realsense:take.db3+lepton",
             "source: realsense:take.db3+lepton: a RealSense file cannot be paired with a live "
-            "Lepton (the file's times are not the live clock)",
+            "thermal camera (the file's times are not the live clock)",
         ),
         ("realsense:{tmp}/take+1.db3", "{tmp}/take+1.db3: no such file"),  # '+' in a path
         ("realsense:{tmp}/a+lepton.bag", "{tmp}/a+lepton.bag: no such file"),
@@ -345,7 +356,7 @@ def test_lepton_frames_with_telemetry_and_ffc_flag(monkeypatch: pytest.MonkeyPat
             got.append(f)
     cam.close()
     assert cap.released
-    assert cap.props[lepton_mod.cv2.CAP_PROP_CONVERT_RGB] == 0
+    assert cap.props[uvc_mod.cv2.CAP_PROP_CONVERT_RGB] == 0
     assert [f.telemetry.frame_counter for f in got] == [0, 1, 2]
     assert [f.telemetry.in_ffc for f in got] == [False, True, False]
     assert all(f.counts.shape == (120, 160) for f in got)
@@ -353,25 +364,35 @@ def test_lepton_frames_with_telemetry_and_ffc_flag(monkeypatch: pytest.MonkeyPat
     assert cam.bad_frames == 1
 
 
-def test_lepton_without_telemetry_rows_says_what_was_expected(
+def test_lepton_without_telemetry_rows_is_taken_with_one_warning(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    use_capture(monkeypatch, FakeCapture([np.zeros((120, 160), np.uint16)]))
-    cam = LeptonCamera(index=0)
-    with pytest.raises(
-        InputError,
-        match=re.escape(
-            "Lepton frame: expected 160x122 Y16 (160x120 image + 2 telemetry rows), got "
-            "160x120 (no telemetry rows: enable the Lepton's telemetry)"
-        ),
-    ):
-        next(iter(cam))
+    image = np.full((60, 80), 8100, np.uint16)  # a Lepton 2.x, telemetry disabled
+    use_capture(monkeypatch, FakeCapture([image, image.tobytes()]))
+    told: list[str] = []
+    cam = LeptonCamera(index=0, timeout_s=0.05, warn=told.append)
+    got = []
+    with pytest.raises(DeviceLostError):
+        got.extend(cam)
+    assert [f.counts.shape for f in got] == [(60, 80), (60, 80)]
+    assert all(np.isnan(f.telemetry.fpa_temp_k) and not f.telemetry.tlinear for f in got)
+    assert told == [
+        "lepton:0: frames without telemetry (80x60): the VOx temperature is unknown "
+        "(compensated at the model's reference VOx, flagged no_vox), shutter (FFC) frames "
+        "cannot be told, and the pixels are what the calibration's thermal.output says; enable "
+        "the Lepton's telemetry"
+    ]
 
 
 def test_lepton_rgb_frames_say_what_was_expected(monkeypatch: pytest.MonkeyPatch) -> None:
+    # an OpenCV build that converts the stream to 8-bit RGB: no temperature can come from it
     use_capture(monkeypatch, FakeCapture([np.zeros((120, 160, 3), np.uint8)]))
-    with pytest.raises(InputError, match=re.escape("got shape (120, 160, 3)")):
+    with pytest.raises(InputError) as info:
         next(iter(LeptonCamera(index=0)))
+    assert str(info.value).startswith(
+        f"lepton:0: OpenCV {uvc_mod.cv2.__version__} returned a frame of shape (120, 160, 3) "
+        "uint8, not a 160x122 or 160x120 or 80x63 or 80x60 uint16 frame nor its bytes"
+    )
 
 
 def fake_sysfs(root: Path, devices: list[tuple[int, str, str | None, int]]) -> Path:
@@ -389,7 +410,7 @@ def fake_sysfs(root: Path, devices: list[tuple[int, str, str | None, int]]) -> P
     return root
 
 
-def test_sysfs_listing_finds_purethermal(tmp_path: Path) -> None:
+def test_sysfs_listing_finds_every_thermal_camera(tmp_path: Path) -> None:
     sysfs = fake_sysfs(
         tmp_path,
         [
@@ -397,11 +418,20 @@ def test_sysfs_listing_finds_purethermal(tmp_path: Path) -> None:
             (1, "Integrated Camera", "04f2:b6dd", 1),  # metadata node: left out
             (2, "PureThermal (fw:v1.3.0)", None, 0),
             (4, "UVC Camera", "1e4e:0100", 0),  # found by USB id
+            (6, "USB Camera", "0bda:5830", 0),  # an InfiRay P2 Pro
+            (8, "Boson: FLIR Video", "09cb:4007", 0),
         ],
     )
     (sysfs / "video9").mkdir()  # unreadable/empty node: no crash
-    assert [d["index"] for d in list_video_devices(sysfs)] == [0, 2, 4, 9]
+    assert [d["index"] for d in list_video_devices(sysfs)] == [0, 2, 4, 6, 8, 9]
+    assert [d["kind"] for d in list_video_devices(sysfs)] == [
+        None, "lepton", "lepton", "p2pro", "boson", None,
+    ]  # fmt: skip
     assert [d["index"] for d in list_purethermal(sysfs)] == [2, 4]
+    assert device_index("p2pro", "", sysfs) == 6
+    assert device_index("boson", "/dev/video3", sysfs) == 3
+    with pytest.raises(InputError, match=r"^no FLIR Boson found; video devices: /dev/video0"):
+        device_index("boson", "", fake_sysfs(tmp_path / "b", [(0, "Integrated Camera", None, 0)]))
 
 
 def test_no_purethermal_lists_what_was_found(tmp_path: Path) -> None:
@@ -442,8 +472,8 @@ def test_lepton_without_telemetry_stops_with_one_line(monkeypatch: pytest.Monkey
     message = str(info.value)
     assert message.startswith("lepton:0: no frame with valid telemetry for 0.2 s (")
     assert message.endswith(
-        "last: telemetry: row A is all zeros (is telemetry enabled? expected 160x122 frames)); "
-        "enable the Lepton's telemetry, as a footer"
+        "last: telemetry: row A is all zeros (is telemetry enabled? expected 160x122 or 80x63 "
+        "frames)); enable the Lepton's telemetry, as a footer"
     )
     assert cam.bad_frames >= 10
 
@@ -463,14 +493,14 @@ def test_lepton_telemetry_in_the_header_is_named(monkeypatch: pytest.MonkeyPatch
         list(LeptonCamera(index=0, telemetry_timeout_s=0.1))
 
 
-def test_lepton_tlinear_frames_are_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_lepton_tlinear_frames_say_so(monkeypatch: pytest.MonkeyPatch) -> None:
     frame = lepton_frame(0)
+    frame[:120] = 3122  # 312.2 K at 0.1 K per value
     frame[121, 48] = 1  # row C word 48: TLinear on; word 49 = 0: 0.1 K per count
     use_capture(monkeypatch, FakeCapture([frame]))
-    with pytest.raises(
-        InputError, match=r"^lepton:0: TLinear output is on \(pixels are kelvin x 10"
-    ):
-        next(iter(LeptonCamera(index=0)))
+    got = next(iter(LeptonCamera(index=0)))
+    assert got.telemetry.tlinear and got.telemetry.tlinear_resolution_k == 0.1
+    assert thermal_output(got.telemetry, ThermalOutput()) == ThermalOutput.kelvin_per(0.1)
 
 
 def test_lepton_one_frame_buffer_and_latency(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -479,7 +509,7 @@ def test_lepton_one_frame_buffer_and_latency(monkeypatch: pytest.MonkeyPatch) ->
     cam = LeptonCamera(index=0, latency_s=0.25)
     before = time.time()
     frame = next(iter(cam))
-    assert cap.props[lepton_mod.cv2.CAP_PROP_BUFFERSIZE] == 1
+    assert cap.props[uvc_mod.cv2.CAP_PROP_BUFFERSIZE] == 1
     assert before - 0.25 <= frame.time_s <= time.time() - 0.25
     assert cam.settings["latency_s"] == 0.25
 

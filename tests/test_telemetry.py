@@ -214,21 +214,36 @@ def test_fuzz_arbitrary_words_never_crash(values: list[int]) -> None:
 
 
 @pytest.mark.parametrize("location", ["footer", "header"])
-def test_split_frame(location: str) -> None:
-    image = np.arange(120 * 160, dtype=np.uint16).reshape(120, 160)
-    telem = words_of(telemetry_bytes()).reshape(2, 160)
+@pytest.mark.parametrize("width", [160, 80])
+def test_split_frame(location: str, width: int) -> None:
+    # a Lepton 3's frame carries its 320 telemetry words in two rows of 160, a Lepton 2.x's
+    # its rows A, B and C in three rows of 80
+    h = 120 if width == 160 else 60
+    image = np.arange(h * width, dtype=np.uint16).reshape(h, width)
+    words = words_of(telemetry_bytes(tlinear=1, tlinear_res=1))[: 240 if width == 80 else 320]
+    telem = words.reshape(-1, width)
     frame = np.vstack([image, telem] if location == "footer" else [telem, image])
-    img, words = split_frame(frame, location)  # type: ignore[arg-type]
+    img, got = split_frame(frame, location)  # type: ignore[arg-type]
     assert np.array_equal(img, image)
-    assert parse_telemetry(words).frame_counter == 42
+    assert got is not None
+    t = parse_telemetry(got)
+    assert t.frame_counter == 42 and t.tlinear and t.tlinear_resolution_k == 0.01
+
+
+@pytest.mark.parametrize("shape", [(120, 160), (60, 80)])
+def test_a_frame_of_the_image_alone_has_no_telemetry(shape: tuple[int, int]) -> None:
+    image = np.ones(shape, np.uint16)
+    img, words = split_frame(image)
+    assert img is image and words is None
 
 
 @pytest.mark.parametrize(
     ("frame", "message"),
     [
         (
-            np.zeros((120, 160), np.uint16),
-            "expected 160x122 Y16 (160x120 image + 2 telemetry rows), got 160x120",
+            np.zeros((121, 160), np.uint16),
+            "expected 160x122 or 80x63 Y16 (the image and its telemetry rows), or the image "
+            "alone (160x120, 80x60), got 160x121",
         ),
         (np.zeros((122, 160, 3), np.uint8), "got shape (122, 160, 3)"),
         (np.zeros((122, 160), np.uint8), "expected 16-bit Y16 pixels (uint16), got uint8"),

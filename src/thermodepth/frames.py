@@ -8,12 +8,14 @@ counts, or its own temperature at a scale: :func:`thermal_output` says which).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .errors import FieldError
 from .radiometry import ZERO_C_IN_K, ThermalOutput
 
 
@@ -66,7 +68,9 @@ class FramePair:
     0 = invalid); thermal: (h, w) uint16 pixel values (raw counts, or the camera's own
     temperature: :func:`thermal_output`); depth_time_s / thermal_time_s: capture
     times in seconds on one clock; index: the pair's sequence number in its stream;
-    ir: optional (H, W) uint8 infrared image of the depth camera.
+    ir: optional (H, W) uint8 infrared image of the depth camera; thermal_preview: optional
+    (h, w, 3) RGB picture the thermal camera made of the frame itself (a P2 Pro's false
+    colour), not recorded.
     """
 
     depth: NDArray[np.uint16]
@@ -76,6 +80,7 @@ class FramePair:
     telemetry: Telemetry
     index: int = 0
     ir: NDArray[np.uint8] | None = None
+    thermal_preview: NDArray[np.uint8] | None = None
 
     @property
     def skew_s(self) -> float:
@@ -113,13 +118,15 @@ class ThermalFrame:
 
     counts: (h, w) uint16 pixel values (raw counts, or the camera's own temperature:
     :func:`thermal_output`); time_s: capture time in seconds (same clock as the depth stream);
-    index: the frame's number in its stream; telemetry: the frame's decoded telemetry.
+    index: the frame's number in its stream; telemetry: the frame's decoded telemetry;
+    preview: the camera's own (h, w, 3) RGB picture of the frame, where it sends one.
     """
 
     counts: NDArray[np.uint16]
     time_s: float
     index: int
     telemetry: Telemetry
+    preview: NDArray[np.uint8] | None = None
 
 
 def pair_of(depth: DepthFrame, thermal: ThermalFrame, index: int) -> FramePair:
@@ -132,6 +139,7 @@ def pair_of(depth: DepthFrame, thermal: ThermalFrame, index: int) -> FramePair:
         thermal.telemetry,
         index,
         depth.ir,
+        thermal.preview,
     )
 
 
@@ -149,9 +157,26 @@ def match_of(pair: FramePair) -> Match:
     """A FramePair as a Match whose stream frames are numbered by the pair's index (the
     inverse of :func:`pair_of`)."""
     d = DepthFrame(pair.depth, pair.depth_time_s, pair.index, pair.ir)
-    t = ThermalFrame(pair.thermal, pair.thermal_time_s, pair.index, pair.telemetry)
+    t = ThermalFrame(
+        pair.thermal, pair.thermal_time_s, pair.index, pair.telemetry, pair.thermal_preview
+    )
     return Match(d, t, pair)
 
 
 StreamEvent = DepthFrame | ThermalFrame | Match
 """What a source emits, in order: stream frames as they arrive and pairs as they form."""
+
+
+_DEPTH_MODE = re.compile(r"^\s*(\d+)x(\d+)(?:@(\d+(?:\.\d+)?))?\s*$")
+
+
+def parse_depth_mode(text: str) -> tuple[int, int, float | None]:
+    """``WxH`` or ``WxH@FPS`` -> (width, height, fps or None); FieldError (``depth_mode``)
+    otherwise."""
+    m = _DEPTH_MODE.match(text)
+    if m is None:
+        raise FieldError("depth_mode", f"{text!r}: expected WIDTHxHEIGHT[@FPS], e.g. 848x480@30")
+    fps = float(m.group(3)) if m.group(3) else None
+    if fps is not None and fps <= 0:
+        raise FieldError("depth_mode", f"{text!r}: the frame rate must be > 0")
+    return int(m.group(1)), int(m.group(2)), fps

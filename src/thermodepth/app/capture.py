@@ -15,7 +15,7 @@ from ..session import stopping
 from ..sinks import SessionResult
 from ..sources.base import Source
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
-from .run import Warn, check_timing, open_pairs
+from .run import Warn, check_source, open_choice
 
 
 @dataclass(frozen=True)
@@ -25,7 +25,8 @@ class CaptureOptions:
     source: a source with both cameras and the IR image (``realsense+lepton``, or a
     recording made with ``--ir``); out_dir: the folder of pairs (numbering continues after
     pairs already there); square_m, board: the board; count: stop after so many pairs
-    kept; max_skew_s, thermal_latency_s: pairing of live cameras (s).
+    kept; max_skew_s, thermal_latency_s: pairing of live cameras (s); depth_mode,
+    thermal_camera: the cameras (:class:`~.run.SourceChoice`).
     """
 
     source: str
@@ -35,6 +36,8 @@ class CaptureOptions:
     count: int = 25
     max_skew_s: float = DEFAULT_MAX_SKEW_S
     thermal_latency_s: float = 0.0
+    depth_mode: str | None = None
+    thermal_camera: str | None = None
 
 
 @dataclass(kw_only=True)
@@ -66,11 +69,11 @@ def capture_board(
     """
     o = options
     check_count("count", o.count)
-    check_timing(o.max_skew_s, o.thermal_latency_s)
+    check_source(o)
     spec = BoardSpec.parse(o.board, o.square_m)
     if o.out_dir.exists() and not o.out_dir.is_dir():
         raise InputError(f"{o.out_dir}: not a folder (pairs go into a folder)")
-    src = open_pairs(o.source, None, None, o.max_skew_s, o.thermal_latency_s, warn, with_ir=True)
+    src = open_choice(o, None, warn, with_ir=True)
     result = CaptureResult(pairing=src.pairing)
     try:
         capture = BoardCapture(spec, o.out_dir, _ir_intrinsics(src))

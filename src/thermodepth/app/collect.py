@@ -17,7 +17,7 @@ from ..session import StreamResult, stream_session
 from ..sinks.sweep import SweepRequest, SweepSink
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
 from ..target import NEAR_REFERENCE_C, TargetSpec
-from .run import Warn, check_timing, open_pairs
+from .run import Warn, check_source, never_ends, open_choice
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,8 @@ class CollectOptions:
     (:class:`~thermodepth.target.TargetSpec`); average: readings per row; conditions:
     emissivity, air temperature and humidity; append: add rows to an existing CSV;
     calibration: the rig's calibration file (a recording keeps its own); frames: stop after
-    so many pairs; max_skew_s, thermal_latency_s: pairing of live cameras (s).
+    so many pairs; max_skew_s, thermal_latency_s: pairing of live cameras (s); depth_mode,
+    thermal_camera: the cameras (:class:`~.run.SourceChoice`).
     """
 
     source: str
@@ -44,6 +45,8 @@ class CollectOptions:
     frames: int | None = None
     max_skew_s: float = DEFAULT_MAX_SKEW_S
     thermal_latency_s: float = 0.0
+    depth_mode: str | None = None
+    thermal_camera: str | None = None
 
     def check(self) -> TargetSpec:
         """One FieldError for an option that cannot be; the parsed target."""
@@ -54,11 +57,11 @@ class CollectOptions:
             )
         check_count("average", self.average)
         check_count("frames", self.frames)
-        if self.frames is None and self.source.strip() == "sim":
+        if self.frames is None and never_ends(self.source):
             raise FieldError("source", "sim never ends: give frames")
-        check_timing(self.max_skew_s, self.thermal_latency_s)
+        check_source(self)
         kind = sources.split_spec(self.source)[0][0]
-        if self.calibration is None and kind not in ("recording", "sim"):
+        if self.calibration is None and kind not in ("recording", "sim", "folder"):
             raise FieldError(
                 "calibration",
                 f"{self.source} needs the rig's calibration file (thermodepth calibrate) to "
@@ -94,9 +97,7 @@ def collect_sweep(
     sink = SweepSink(options.out, request, options.append, say)
     sink.check()
     cal = Calibration.load(options.calibration) if options.calibration else None
-    src = open_pairs(
-        options.source, cal, options.frames, options.max_skew_s, options.thermal_latency_s, warn
-    )
+    src = open_choice(options, cal, warn, frames=options.frames)
     result = CollectResult(out=options.out, pairing=src.pairing)
     try:
         stream_session(

@@ -1,10 +1,13 @@
-"""``thermodepth devices``: what cameras are attached, and the source spec of each."""
+"""``thermodepth devices``: what cameras are attached, and the source spec of each (thermal
+cameras found by their USB vendor:product: PureThermal 1e4e:0100, InfiRay P2 Pro 0bda:5830,
+FLIR Boson 09cb:4007)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from ..sources import list_devices
+from ..sources.uvc import CAMERA_TITLES
 
 __all__ = ["describe_devices", "list_devices"]
 
@@ -24,20 +27,16 @@ def describe_devices(found: dict[str, Any]) -> list[str]:
             )
     else:
         lines.append("no RealSense device found")
-    if found["purethermal"]:
-        for d in found["purethermal"]:
-            lines.append(
-                f"PureThermal (Lepton) /dev/video{d['index']} {d['name']!r}  "
-                f"-> --source lepton:{d['index']}"
-            )
-    else:
-        others = [
-            f"/dev/video{d['index']} ({d['name'] or 'unnamed'})"
-            for d in found["video"]
-            if not d["purethermal"]
-        ]
+    for d in found["thermal"]:
         lines.append(
-            "no PureThermal (Lepton) found"
-            + (f"; other video devices: {', '.join(others)}" if others else "")
+            f"{CAMERA_TITLES[d['kind']]} /dev/video{d['index']} {d['name']!r}  "
+            f"-> --source {d['kind']}:{d['index']} (with a depth camera: "
+            f"realsense+{d['kind']}:{d['index']})"
+        )
+    if not found["thermal"]:
+        others = [f"/dev/video{d['index']} ({d['name'] or 'unnamed'})" for d in found["video"]]
+        lines.append(
+            "no thermal camera found (PureThermal Lepton, InfiRay P2 Pro / Topdon TC001, FLIR "
+            "Boson)" + (f"; other video devices: {', '.join(others)}" if others else "")
         )
     return lines

@@ -5,14 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .. import sources
 from ..calibration import Calibration
 from ..errors import FieldError, check_count
 from ..io.recording import DEFAULT_CODEC, check_output, check_storage
 from ..progress import SILENT, Reporter
 from ..session import RecordResult, record_session
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
-from .run import Warn, check_timing
+from .run import Warn, check_source, never_ends, open_choice
 
 
 @dataclass(frozen=True)
@@ -26,7 +25,8 @@ class RecordOptions:
     live cameras (s); with_ir: also the infrared image; overwrite: replace an existing
     recording (nothing else is replaced); depth_frames: keep ``"all"`` the depth frames or
     only those ``"paired"`` with a thermal frame (3.4x fewer at 30 + 8.7 fps; needs both
-    cameras); codec: the images' (``lz4``, fast; ``zstd``, smaller).
+    cameras); codec: the images' (``lz4``, fast; ``zstd``, smaller); depth_mode,
+    thermal_camera: the cameras (:class:`~.run.SourceChoice`).
     """
 
     source: str
@@ -40,15 +40,17 @@ class RecordOptions:
     overwrite: bool = False
     depth_frames: str = "all"
     codec: str = DEFAULT_CODEC
+    depth_mode: str | None = None
+    thermal_camera: str | None = None
 
     def check(self) -> None:
         """One FieldError for an option that cannot be (a simulator with no end included)."""
         if self.duration_s is not None and not self.duration_s > 0:
             raise FieldError("duration_s", "must be > 0 seconds")
         check_count("frames", self.frames)
-        if self.duration_s is None and self.frames is None and self.source.strip() == "sim":
+        if self.duration_s is None and self.frames is None and never_ends(self.source):
             raise FieldError("source", "sim never ends: give frames or a duration")
-        check_timing(self.max_skew_s, self.thermal_latency_s)
+        check_source(self)
         check_storage(self.depth_frames, self.codec)
 
 
@@ -60,14 +62,7 @@ def record(
     options.check()
     check_output(options.out, options.overwrite)
     cal = Calibration.load(options.calibration) if options.calibration else None
-    src = sources.open_source(
-        options.source,
-        cal,
-        max_skew_s=options.max_skew_s,
-        with_ir=options.with_ir,
-        thermal_latency_s=options.thermal_latency_s,
-        warn=warn,
-    )
+    src = open_choice(options, cal, warn, with_ir=options.with_ir, pairs=False)
     return record_session(
         src,
         options.out,

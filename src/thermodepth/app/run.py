@@ -6,11 +6,12 @@ import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from .. import sources
 from ..calibration import Calibration
 from ..errors import FieldError, check_count
+from ..frames import parse_depth_mode
 from ..pipeline import Pipeline, Settings
 from ..session import RunResult, run_session
 from ..sinks import MeasurementsSink, MqttSink, RecorderSink, Sink
@@ -36,7 +37,8 @@ class RunOptions:
     (``mqtt://[USER@]HOST[:PORT]/PREFIX``; the settings' ``mqtt`` section says how);
     viewer / viewer_save / viewer_connect: show the run in rerun (a viewer spawned, an
     ``.rrd`` file, a running viewer's address; the settings' ``viewer`` section says how);
-    snapshots: with out_dir, an overlay PNG and a PLY every so many frames and at every alarm.
+    snapshots: with out_dir, an overlay PNG and a PLY every so many frames and at every alarm;
+    depth_mode, thermal_camera: the cameras (:class:`SourceChoice`).
     """
 
     source: str = "sim"
@@ -51,12 +53,14 @@ class RunOptions:
     viewer_save: Path | None = None
     viewer_connect: str | None = None
     snapshots: int | None = None
+    depth_mode: str | None = None
+    thermal_camera: str | None = None
 
     def check(self) -> None:
         """One FieldError for an option that cannot be."""
         check_count("frames", self.frames)
         check_count("snapshots", self.snapshots)
-        check_timing(self.max_skew_s, self.thermal_latency_s)
+        check_source(self)
         if self.mqtt is not None:
             MqttTarget.parse(self.mqtt)
         check_viewer_options(self.viewer, self.viewer_save, self.viewer_connect)
@@ -64,39 +68,69 @@ class RunOptions:
             raise FieldError("snapshots", "snapshots go into the measurements folder: give --out")
 
 
-def check_timing(max_skew_s: float, thermal_latency_s: float) -> None:
-    """Pairing options of live sources: both durations >= 0 (FieldError otherwise)."""
-    for name, value in (("max_skew_s", max_skew_s), ("thermal_latency_s", thermal_latency_s)):
-        if not value >= 0:
+class SourceChoice(Protocol):
+    """What every command that opens a source is told: the spec, the pairing of live cameras
+    (``max_skew_s``, ``thermal_latency_s``: seconds) and the cameras' modes: ``depth_mode``
+    (``WxH[@FPS]``, a RealSense's or the simulator's; None: the camera's recommended one) and
+    ``thermal_camera`` (the simulated one; None: the Lepton 3)."""
+
+    @property
+    def source(self) -> str: ...
+    @property
+    def max_skew_s(self) -> float: ...
+    @property
+    def thermal_latency_s(self) -> float: ...
+    @property
+    def depth_mode(self) -> str | None: ...
+    @property
+    def thermal_camera(self) -> str | None: ...
+
+
+def check_source(choice: SourceChoice) -> None:
+    """The parts of a source choice that can be checked before any camera starts: both
+    durations >= 0 and a depth mode that reads as one (FieldError otherwise)."""
+    for name in ("max_skew_s", "thermal_latency_s"):
+        if not getattr(choice, name) >= 0:
             raise FieldError(name, "must be >= 0")
+    if choice.depth_mode is not None:
+        parse_depth_mode(choice.depth_mode)
 
 
-def open_pairs(
-    spec: str,
+def open_choice(
+    choice: SourceChoice,
     calibration: Calibration | None,
-    frames: int | None,
-    max_skew_s: float,
-    thermal_latency_s: float,
     warn: Warn | None,
+    *,
+    frames: int | None = None,
     with_ir: bool = False,
+    pairs: bool = True,
 ) -> sources.Source:
-    """:func:`~thermodepth.sources.open_source` for a session that needs pairs: a source
-    without them (one camera) is refused with one line, and closed."""
+    """:func:`~thermodepth.sources.open_source` of what ``choice`` says; with ``pairs`` a
+    source without them (one camera) is refused with one line, and closed."""
     src = sources.open_source(
-        spec,
+        choice.source,
         calibration,
         frames=frames,
-        max_skew_s=max_skew_s,
+        max_skew_s=choice.max_skew_s,
         with_ir=with_ir,
-        thermal_latency_s=thermal_latency_s,
+        thermal_latency_s=choice.thermal_latency_s,
         warn=warn,
+        depth_mode=choice.depth_mode,
+        thermal_camera=choice.thermal_camera,
     )
-    try:
-        src.require_pairs()
-    except BaseException:
-        src.close()
-        raise
+    if pairs:
+        try:
+            src.require_pairs()
+        except BaseException:
+            src.close()
+            raise
     return src
+
+
+def never_ends(spec: str) -> bool:
+    """True for a source that gives pairs for ever (the simulator), which a session must be
+    told when to stop."""
+    return sources.split_spec(spec)[0][0] == "sim"
 
 
 SinkBuilder = Callable[[RunOptions, Settings, Warn | None], Sink | None]
@@ -148,9 +182,7 @@ def run(options: RunOptions, sinks: Sequence[Sink] = (), warn: Warn | None = Non
     all_sinks = [*outputs, *sinks]
     for sink in all_sinks:
         sink.check()
-    src = open_pairs(
-        options.source, cal, options.frames, options.max_skew_s, options.thermal_latency_s, warn
-    )
+    src = open_choice(options, cal, warn, frames=options.frames)
     try:
         # the source's calibration, else the settings'; Pipeline refuses when neither has one
         pipeline = Pipeline(settings, src.calibration or cal, warn=warn)

@@ -171,6 +171,22 @@ ThermalLatencyMs = Annotated[
         "default 0: not calibrated)."
     ),
 ]
+DepthMode = Annotated[
+    str | None,
+    typer.Option(
+        metavar="WxH[@FPS]",
+        help="The depth camera's mode, e.g. 848x480@30 (default: the camera's recommended "
+        "one: 848x480 on a D435/D455, 1280x720 on a D415; the simulated D435's 1280x720).",
+    ),
+]
+ThermalCamera = Annotated[
+    str | None,
+    typer.Option(
+        metavar="NAME",
+        help="The simulated thermal camera: lepton3 (default), lepton3.5, lepton2.5, p2pro, "
+        "boson320, boson640 (live rigs name theirs in --source: realsense+p2pro).",
+    ),
+]
 OutDir = Annotated[Path, typer.Option("-o", "--out", help="Directory to write.")]
 Seed = Annotated[int, typer.Option(help="Random seed.")]
 ReportDir = Annotated[

@@ -15,6 +15,7 @@ from ..errors import ThermodepthError
 from .base import (
     BARS,
     Board,
+    DepthMode,
     MaxSkewMs,
     ReportDir,
     ThermalLatencyMs,
@@ -180,8 +181,8 @@ def capture_board_cmd(
     source: Annotated[
         str,
         typer.Option(
-            help="Both cameras with the IR image: realsense+lepton, or recording:PATH "
-            "(recorded with --ir)."
+            help="Both cameras with the IR image: realsense+lepton (any depth + thermal "
+            "camera), or recording:PATH (recorded with --ir)."
         ),
     ],
     square_m: Annotated[
@@ -194,13 +195,21 @@ def capture_board_cmd(
     count: Annotated[int, typer.Option(help="Stop after so many pairs kept.")] = 25,
     max_skew_ms: MaxSkewMs = 20.0,
     thermal_latency_ms: ThermalLatencyMs = 0.0,
+    depth_mode: DepthMode = None,
 ) -> None:
     """Keep the pairs of a stream worth calibrating with: the whole board in both images,
     held still, shutter open, a new region or tilt (Ctrl-C stops, keeping every pair)."""
     from ..app.capture import CaptureOptions, capture_board, verdict_lines
 
     options = CaptureOptions(
-        source, out, square_m, board, count, max_skew_ms / 1000.0, thermal_latency_ms / 1000.0
+        source,
+        out,
+        square_m,
+        board,
+        count,
+        max_skew_ms / 1000.0,
+        thermal_latency_ms / 1000.0,
+        depth_mode,
     )
     result = capture_board(options, BARS, warn_line)
     console.print(

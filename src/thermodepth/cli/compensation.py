@@ -14,10 +14,12 @@ from ..errors import ThermodepthError
 from .base import (
     BARS,
     AmbientTempC,
+    DepthMode,
     Emissivity,
     HumidityPct,
     MaxSkewMs,
     ReflectedTempC,
+    ThermalCamera,
     ThermalLatencyMs,
     app,
     conditions_of,
@@ -63,7 +65,10 @@ def collect_sweep_cmd(
     ] = None,
     source: Annotated[
         str,
-        typer.Option(help="realsense+lepton (live), recording:PATH, or sim (see README)."),
+        typer.Option(
+            help="realsense+lepton (live: any depth + thermal camera), recording:PATH, "
+            "folder:PATH, or sim (see README)."
+        ),
     ] = "realsense+lepton",
     target: Annotated[
         str,
@@ -86,6 +91,8 @@ def collect_sweep_cmd(
     frames: Annotated[int | None, typer.Option(help="Stop after so many pairs.")] = None,
     max_skew_ms: MaxSkewMs = 20.0,
     thermal_latency_ms: ThermalLatencyMs = 0.0,
+    depth_mode: DepthMode = None,
+    thermal_camera: ThermalCamera = None,
 ) -> None:
     """Read the reference plate in every pair (distance from the depth camera, VOx from the
     telemetry, mean reading), one sweep CSV row per --average pairs, each on disk as it is
@@ -105,6 +112,8 @@ def collect_sweep_cmd(
         frames,
         max_skew_ms / 1000.0,
         thermal_latency_ms / 1000.0,
+        depth_mode,
+        thermal_camera,
     )
     result = collect_sweep(options, BARS, warn_line, say_line)
     print_outputs(result)

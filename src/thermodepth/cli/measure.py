@@ -11,7 +11,9 @@ from rich.markup import escape
 from ..errors import ThermodepthError
 from .base import (
     BARS,
+    DepthMode,
     MaxSkewMs,
+    ThermalCamera,
     ThermalLatencyMs,
     app,
     console,
@@ -30,7 +32,8 @@ if TYPE_CHECKING:
 def devices_cmd(
     as_json: Annotated[bool, typer.Option("--json", help="Print as JSON.")] = False,
 ) -> None:
-    """List attached RealSense cameras and PureThermal (Lepton) boards."""
+    """List attached RealSense cameras and thermal cameras (PureThermal Lepton, InfiRay P2
+    Pro / Topdon TC001, FLIR Boson), each with the --source that opens it."""
     from ..app.devices import describe_devices, list_devices
 
     found = list_devices()
@@ -49,7 +52,8 @@ def record_cmd(
         typer.Option(
             "--source",
             "-s",
-            help="sim, realsense[:SERIAL|:FILE], lepton[:N], realsense+lepton, recording:PATH.",
+            help="sim, realsense[:SERIAL|:FILE], lepton[:N], p2pro[:N], boson[:N], "
+            "realsense+lepton (any depth + thermal camera), recording:PATH, folder:PATH.",
         ),
     ],
     out: Annotated[Path, typer.Option("-o", "--out", help="Recording to create (.zarr).")],
@@ -91,6 +95,8 @@ def record_cmd(
             "faster); zstd stores 6-33 % less.",
         ),
     ] = "lz4",
+    depth_mode: DepthMode = None,
+    thermal_camera: ThermalCamera = None,
 ) -> None:
     """Record a source into a crash-safe Zarr v3 recording (Ctrl-C stops cleanly)."""
     from ..app.record import RecordOptions, record
@@ -107,6 +113,8 @@ def record_cmd(
         overwrite,
         depth,
         codec,
+        depth_mode,
+        thermal_camera,
     )
     result = record(options, BARS, warn_line)
     console.print(
@@ -154,7 +162,8 @@ def run_cmd(
     source: Annotated[
         str,
         typer.Option(
-            help="Where frames come from: sim, realsense+lepton, recording:PATH (see README)."
+            help="Where frames come from: sim, realsense+lepton (any depth + thermal camera: "
+            "realsense+p2pro, realsense+boson), recording:PATH, folder:PATH (see README)."
         ),
     ] = "sim",
     settings: Annotated[
@@ -194,6 +203,8 @@ def run_cmd(
             help="With --out: an overlay PNG and a PLY every N frames and at every alarm.",
         ),
     ] = None,
+    depth_mode: DepthMode = None,
+    thermal_camera: ThermalCamera = None,
 ) -> None:
     """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
     from ..app.run import RunOptions, run
@@ -212,6 +223,8 @@ def run_cmd(
         viewer_save=viewer_save,
         viewer_connect=viewer_connect,
         snapshots=snapshots,
+        depth_mode=depth_mode,
+        thermal_camera=thermal_camera,
     )
     result = run(options, [] if quiet else [CallbackSink(print_frame)], warn_line)
     console.print(
@@ -270,9 +283,8 @@ def print_frame(fused: FusedFrame) -> None:
             "closed (FFC): not measured[/dim]"
         )
         return
-    parts = [
-        f"frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  VOx {fused.vox_temp_c:5.2f} C"
-    ]
+    vox = "  -  " if fused.vox_temp_c != fused.vox_temp_c else f"{fused.vox_temp_c:5.2f}"
+    parts = [f"frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  VOx {vox} C"]
     if fused.hotspots:
         h = fused.hotspots[0]
         parts.append(

@@ -316,6 +316,29 @@ def zbuffer(depth, scale, rays, lens, view, keys):  # pragma: no cover - JIT
 
 
 @numba.njit(parallel=True, **_JIT)
+def dilate_keys(keys, radius, tmp, out):  # pragma: no cover - JIT
+    # out = the smallest key within `radius` pixels each way (a (2 r + 1)^2 box), as two 1-D
+    # passes through tmp; keys, tmp, out (h_t, w_t) uint64. When the thermal camera's pixels
+    # are finer than the depth camera's, neighbouring depth pixels land more than one
+    # thermal pixel apart and the z-buffer has holes: through them a hidden surface would
+    # take the temperature of what hides it. Each thermal pixel takes the nearest surface
+    # around it, as far as the depth pixels' spacing (ReprojectMethod chooses the radius).
+    h, w = keys.shape
+    for v in numba.prange(h):
+        for u in range(w):
+            best = keys[v, u]
+            for du in range(max(u - radius, 0), min(u + radius + 1, w)):
+                best = min(best, keys[v, du])
+            tmp[v, u] = best
+    for v in numba.prange(h):
+        for u in range(w):
+            best = tmp[v, u]
+            for dv in range(max(v - radius, 0), min(v + radius + 1, h)):
+                best = min(best, tmp[dv, u])
+            out[v, u] = best
+
+
+@numba.njit(parallel=True, **_JIT)
 def sample(
     depth, scale, rays, lens, view, values, nearest_z, build, how, into, sums
 ):  # pragma: no cover - JIT

@@ -1,7 +1,13 @@
 """``reproject``: every depth pixel deprojected with its depth, moved into the thermal frame
 and projected through the thermal lens (OpenCV distortion, refused beyond the radius where
 the polynomial folds), with a z-buffer test so that a surface hidden from the thermal camera
-does not take the temperature of what hides it. Exact up to the depth noise."""
+does not take the temperature of what hides it. Exact up to the depth noise.
+
+Where the thermal camera's pixels are finer than the depth camera's (a Boson 640 beside a
+D435 at 848x480: neighbouring depth pixels land 1.6 thermal pixels apart), each depth pixel
+covers more than the thermal pixel it lands in; the z-buffer then takes, for every thermal
+pixel, the nearest surface within the depth pixels' spacing (:func:`dilation_radius`), so that
+it has no holes through which a hidden surface would take the temperature of what hides it."""
 
 from __future__ import annotations
 
@@ -22,6 +28,7 @@ from .kernels import (
     Sampled,
     Sampling,
     ViewTable,
+    dilate_keys,
     sample,
     sampling_lag,
     view_table,
@@ -71,6 +78,43 @@ def rays_of(cal: Calibration) -> Rays:
     return Rays(a[0], a[1], a[2], np.zeros((d.height, 3), dtype=np.float32))
 
 
+SPACING_DISTANCES_M = (0.3, 0.5, 1.0, 2.0, 5.0)
+"""Distances (Z, m) at which the spacing of neighbouring depth pixels in the thermal image is
+measured (:func:`depth_pixel_spacing`): the baseline's parallax changes it a little with
+distance."""
+
+
+def depth_pixel_spacing(calibration: Calibration, step: int = 8) -> float:
+    """The largest distance (thermal pixels, along u or v) between where two neighbouring
+    depth pixels land in the thermal image, over every ``step``-th depth pixel that lands
+    inside it at :data:`SPACING_DISTANCES_M`: about fx_thermal / fx_depth, and below 1 when
+    the thermal camera's pixels are coarser than the depth camera's."""
+    cal = calibration
+    u, v = np.meshgrid(
+        np.arange(0, cal.depth.width - 1, step, dtype=np.float64),
+        np.arange(0, cal.depth.height - 1, step, dtype=np.float64),
+    )
+    px = np.stack([u.ravel(), v.ravel()], -1)
+    spacing = 0.0
+    for z in SPACING_DISTANCES_M:
+        here, right, below = (
+            cal.thermal.project(cal.thermal_from_depth.apply(cal.depth.deproject(q, z)))
+            for q in (px, px + np.array([1.0, 0.0]), px + np.array([0.0, 1.0]))
+        )
+        inside = cal.thermal.contains(here)
+        if inside.any():
+            steps = np.abs(np.concatenate([right - here, below - here], axis=1))[inside]
+            spacing = max(spacing, float(steps.max()))
+    return spacing
+
+
+def dilation_radius(spacing_px: float) -> int:
+    """Thermal pixels each way the z-buffer looks around a pixel for the nearest surface when
+    depth pixels land ``spacing_px`` apart: a box of 2 r + 1 >= spacing pixels holds one of
+    them wherever the thermal pixel lies (0: no holes, thermal pixels coarser)."""
+    return max(0, int(np.ceil((spacing_px - 1.0) / 2.0)))
+
+
 class ReprojectMethod:
     """Exact, occlusion-aware registration (see the module docstring). Everything that does
     not depend on the frame (rays, the lens, the view table) is computed once, here."""
@@ -90,6 +134,7 @@ class ReprojectMethod:
             np.empty((h, W_SAMPLES, 2), dtype=np.int32),
         )
         view_table(self._scale, self._rays, self._lens, self._view)
+        self.dilation = dilation_radius(depth_pixel_spacing(calibration))
         tol_sigma, tol_slope = options.tolerance.coefficients(calibration)
         self._sampling = {
             bilinear: Sampling(
@@ -104,11 +149,18 @@ class ReprojectMethod:
 
     def _zbuffer(self, depth: NDArray[np.uint16]) -> tuple[FloatArray, FloatArray]:
         """Nearest Z per thermal pixel and that point's range, flat (h * w) views, inf / NaN
-        where no depth pixel lands."""
+        where no depth pixel lands (within :attr:`dilation` pixels, when thermal pixels are
+        finer than depth pixels)."""
         h_t, w_t = self.calibration.thermal.shape
         keys = np.empty((self._n_chunks, h_t * w_t), dtype=np.uint64)
         zbuffer(depth, self._scale, self._rays, self._lens, self._view, keys)
-        halves = keys[0].view(np.float32)  # little-endian: range, then Z
+        nearest = keys[0]
+        if self.dilation:
+            grid = nearest.reshape(h_t, w_t)
+            nearest = np.empty_like(grid)
+            dilate_keys(grid, self.dilation, np.empty_like(grid), nearest)
+            nearest = nearest.ravel()
+        halves = nearest.view(np.float32)  # little-endian: range, then Z
         return halves[1::2], halves[0::2]
 
     def depth_to_thermal(self, depth: NDArray[np.uint16]) -> DepthOnThermal:
@@ -126,6 +178,8 @@ class ReprojectMethod:
         thermal_index: NDArray[np.int32] | None,
         regions: RowSums,
     ) -> ThermalOnDepth:
+        if nearest is None and self.dilation:  # holes to fill first: the whole z-buffer
+            nearest = self.depth_to_thermal(depth)
         if nearest is None:  # the sampling kernel builds its own z-buffer
             zbuf = np.full(thermal.size, FAR_M, dtype=np.float32)
         else:

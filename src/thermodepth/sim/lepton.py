@@ -1,4 +1,5 @@
-"""The virtual Lepton 3: scene radiance -> optics -> VOx sensor -> 14-bit counts + telemetry.
+"""The virtual thermal camera (a Lepton 3 by default): scene radiance -> optics -> VOx sensor ->
+14-bit counts (or the camera's own kelvin) + telemetry.
 
 Chain, per frame (docs/simulator.md has every equation, default and source):
 
@@ -29,11 +30,14 @@ from ..frames import FfcState, Telemetry
 from ..radiometry import (
     LWIR_8_14,
     PAPER_2022,
+    RAW_COUNTS,
     PlanckConstants,
     SpectralResponse,
+    ThermalOutput,
     atmospheric_transmission,
     band_radiance,
     counts_from_kelvin,
+    kelvin_from_counts,
 )
 from .raycast import Hits
 from .scene import Scene
@@ -78,7 +82,12 @@ class LeptonModel:
     fpn_drift_counts_per_k: SD over pixels of offset drift per kelvin of FPA change since FFC;
     ffc_interval_s / ffc_delta_k: FFC every so long or after so much FPA change;
     ffc_duration_s: shutter closed; ffc_imminent_s: warning before a timed FFC;
-    housing_offset_k: housing temperature minus FPA temperature; bits: ADC depth.
+    housing_offset_k: housing temperature minus FPA temperature; bits: ADC depth;
+    output: what the pixel values are (raw counts, or the camera's own kelvin at a scale);
+    tells_output: the telemetry says a kelvin output (a Lepton's TLinear flag; the P2 Pro's
+    source knows it), else only the calibration does (a Boson); reports_fpa: the frames carry
+    the FPA temperature (NaN otherwise: an InfiRay P2 Pro); ffc_freeze: while the shutter is
+    closed the camera repeats its last image (P2 Pro, Boson) instead of showing the shutter.
     """
 
     planck: PlanckConstants = PAPER_2022
@@ -98,10 +107,24 @@ class LeptonModel:
     ffc_imminent_s: float = 2.0
     housing_offset_k: float = -1.0
     bits: int = 14
+    output: ThermalOutput = RAW_COUNTS
+    tells_output: bool = True
+    reports_fpa: bool = True
+    ffc_freeze: bool = False
 
     @property
     def max_counts(self) -> int:
         return 2**self.bits - 1
+
+    def values(self, counts: FloatArray) -> NDArray[np.uint16]:
+        """The camera's pixel values of float counts: rounded counts within the ADC's range,
+        or its own temperature (kelvin of the counts, emissivity 1, no air) in units of its
+        scale."""
+        if self.output.is_kelvin:
+            kelvin = kelvin_from_counts(counts, self.planck)
+            counts = (np.nan_to_num(kelvin) - self.output.offset_k) / self.output.scale_k
+            return np.clip(np.rint(counts), 0, 65535).astype(np.uint16)
+        return np.clip(np.rint(counts), 0, self.max_counts).astype(np.uint16)
 
     @cached_property
     def noise_counts(self) -> float:
@@ -216,11 +239,12 @@ def counts_from_radiance(
 
 class LeptonSensor:
     """The stateful part of the camera: FPA temperature, FFC (shutter) cycle, fixed-pattern
-    offsets, temporal noise, 14-bit counts and telemetry.
+    offsets, temporal noise, the pixel values (14-bit counts, or the camera's own kelvin) and
+    telemetry.
 
-    ``read(time_s, aperture)`` turns an aperture radiance image into counts and telemetry.
-    Call it with increasing times. ``noise=False`` gives exact float counts (no FPN, no
-    noise, no rounding) for physics checks.
+    ``read(time_s, aperture)`` turns an aperture radiance image into pixel values and
+    telemetry. Call it with increasing times. ``noise=False`` gives exact float counts (no
+    FPN, no noise, no rounding, whatever the output) for physics checks.
     """
 
     def __init__(
@@ -244,6 +268,7 @@ class LeptonSensor:
         self._ffc_fpa_k = float(fpa(0.0))  # offsets drift from the FPA temperature at FFC
         self._residual = np.zeros(shape)
         self._prev_s: float | None = None  # time of the previous read
+        self._last: NDArray[np.uint16] | FloatArray | None = None  # the last image given
 
     def _ffc_due(self, time_s: float, fpa_k: float) -> bool:
         assert self._last_ffc_end_s is not None
@@ -298,25 +323,35 @@ class LeptonSensor:
         fpa_k = float(self.fpa(time_s))
         state = self._state(time_s, fpa_k)
         self._prev_s = time_s
-        if state == FfcState.IN_PROGRESS:
-            # the image shows the closed shutter, at the housing temperature
-            shutter = self.table.to_radiance(fpa_k + m.housing_offset_k)
-            aperture = np.full(self.shape, shutter)
-        counts = counts_from_radiance(
-            measured_radiance(aperture, fpa_k, m, self.table), m, self.table
-        )
-        if self.noise:
-            counts = counts + self._residual + self.drift_pattern * (fpa_k - self._ffc_fpa_k)
-            counts = counts + self.rng.standard_normal(self.shape) * m.noise_counts
-            counts = np.clip(np.rint(counts), 0, m.max_counts).astype(np.uint16)
+        frozen = state == FfcState.IN_PROGRESS and m.ffc_freeze and self._last is not None
+        if frozen:  # the camera repeats its last image while its shutter is closed
+            assert self._last is not None
+            values = self._last.copy()
+        else:
+            if state == FfcState.IN_PROGRESS:
+                # the image shows the closed shutter, at the housing temperature
+                shutter = self.table.to_radiance(fpa_k + m.housing_offset_k)
+                aperture = np.full(self.shape, shutter)
+            values = counts_from_radiance(
+                measured_radiance(aperture, fpa_k, m, self.table), m, self.table
+            )
+            if self.noise:
+                values = values + self._residual + self.drift_pattern * (fpa_k - self._ffc_fpa_k)
+                values = m.values(values + self.rng.standard_normal(self.shape) * m.noise_counts)
+            self._last = values
         since = None if self._last_ffc_end_s is None else time_s - self._last_ffc_end_s
+        kelvin_told = m.output.is_kelvin and m.tells_output
+        nan = float("nan")
         telemetry = Telemetry(
             frame_counter=self.frame_counter,
-            fpa_temp_k=round(fpa_k, 2),  # telemetry carries centikelvin
-            housing_temp_k=round(fpa_k + m.housing_offset_k, 2),
+            # telemetry carries centikelvin
+            fpa_temp_k=round(fpa_k, 2) if m.reports_fpa else nan,
+            housing_temp_k=round(fpa_k + m.housing_offset_k, 2) if m.reports_fpa else nan,
             ffc_state=state,
             time_since_ffc_s=since,
             ffc_desired=state == FfcState.IMMINENT,
+            tlinear=kelvin_told,
+            tlinear_resolution_k=m.output.scale_k if kelvin_told else None,
         )
         self.frame_counter += 1
-        return counts, telemetry
+        return values, telemetry

@@ -15,8 +15,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
-from ..camera import Intrinsics, RigidTransform, rotation_from_euler
+from ..camera import RigidTransform
 from ..frames import FramePair
+from .cameras import depth_mode, rig_calibration, thermal_camera
 from .d435 import DepthCameraModel, depth_units, ir_image, stereo_shadow
 from .lepton import (
     FpaProfile,
@@ -36,24 +37,15 @@ FloatArray = NDArray[np.float64]
 
 
 def default_calibration() -> Calibration:
-    """The virtual rig's true calibration.
+    """The virtual rig's true calibration with its default cameras (a Lepton 3 beside a D435
+    at 1280x720; :func:`~.cameras.rig_calibration`).
 
     Depth: 1280x720, fx = fy = 645, principal point at the centre, no distortion, 1 mm units.
     Thermal: 160x120, HFOV 56 deg (fx = 80 / tan 28 deg = 150.5), principal point ~1 px off
     centre, mild barrel distortion. The Lepton sits 40 mm left of, 6 mm below and 3 mm
-    behind the depth origin (the D435's right imager is on the other side, so the band the
-    Lepton cannot see behind near objects keeps valid depth), turned by about a degree:
-    parallax at 0.5 m is ~12 thermal px.
+    behind the depth origin, turned by about a degree: parallax at 0.5 m is ~12 thermal px.
     """
-    depth = Intrinsics(1280, 720, 645.0, 645.0, 639.5, 359.5)
-    fx_t = 80.0 / np.tan(np.radians(28.0))
-    thermal = Intrinsics(
-        160, 120, fx_t, fx_t * 1.002, 80.6, 58.8, np.array([-0.08, 0.02, 0.0004, -0.0003, 0.0])
-    )
-    rot = rotation_from_euler(np.radians(0.4), np.radians(-0.6), np.radians(1.1))
-    centre_in_depth = np.array([-0.040, 0.006, -0.003])
-    t = RigidTransform(rot, -rot @ centre_in_depth, "thermal", "depth")
-    return Calibration(depth, thermal, 0.001, t)
+    return rig_calibration()
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,6 +119,24 @@ class Rig:
     depth_phase_s: float = 0.004
     trajectory: Trajectory | None = None
     frame_interval_s: float | None = None
+
+    @classmethod
+    def of_cameras(
+        cls,
+        scene: Scene,
+        pose: RigidTransform,
+        thermal: str | None = None,
+        depth: str | None = None,
+        **kwargs: Any,
+    ) -> Rig:
+        """A rig of the simulated cameras named (:data:`~.cameras.THERMAL_CAMERAS`, a depth
+        mode ``WxH[@FPS]`` of :data:`~.cameras.DEPTH_MODES`; None: the Lepton 3 and
+        1280x720 at 30 fps) with its true calibration; ``kwargs`` as the constructor's (a
+        ``lepton`` given replaces the camera's sensor)."""
+        cam, mode = thermal_camera(thermal), depth_mode(depth)
+        kwargs.setdefault("lepton", cam.sensor)
+        kwargs.setdefault("depth_model", DepthCameraModel(fps=mode.fps))
+        return cls(scene, pose, rig_calibration(cam, mode), **kwargs)
 
     def __post_init__(self) -> None:
         if (self.pose.to_frame, self.pose.from_frame) != ("world", "depth"):

@@ -1,20 +1,29 @@
-"""Sources of FramePairs: the simulated rig, real cameras, recordings; pairing in time.
+"""Sources of FramePairs: the simulated rig, real cameras, recordings, image folders; pairing
+in time.
 
 :func:`open_source` turns a spec into a :class:`Source`:
 
-==========================  ===============================================================
-spec                        what
-==========================  ===============================================================
-``sim``                     the simulated rig (plate + 70 C chip at 1 m)
-``realsense[:SERIAL]``      a live RealSense (depth only: recordable, no pairs)
-``realsense:FILE.bag|db3``  a RealSense recording played back (depth only)
-``lepton[:INDEX]``          a Lepton 3 on a PureThermal, /dev/videoINDEX (thermal only)
-``realsense+lepton``        both live cameras paired in time; each part takes its options,
-                            e.g. ``realsense:123456+lepton:2`` (a RealSense file cannot be
-                            paired with a live Lepton: their clocks differ)
-``recording:PATH``          a thermodepth recording (zarr), replayed bit for bit
-==========================  ===============================================================
+================================  =========================================================
+spec                              what
+================================  =========================================================
+``sim[:KEY=VALUE,...]``           the simulated rig (plate + 70 C chip at 1 m); keys
+                                  ``thermal`` (a camera of
+                                  :data:`~thermodepth.sim.cameras.THERMAL_CAMERAS`) and
+                                  ``depth`` (a mode, ``848x480@30``)
+``realsense[:SERIAL]``            a live RealSense (depth only: recordable, no pairs)
+``realsense:FILE.bag|db3``        a RealSense recording played back (depth only)
+``lepton[:N]``                    a Lepton 2.5/3/3.5 on a PureThermal, /dev/videoN
+``p2pro[:N]``                     an InfiRay P2 Pro / Topdon TC001
+``boson[:N]``                     a FLIR Boson / Boson+ (its output: the calibration's)
+``DEPTH+THERMAL``                 a live depth camera and a thermal camera paired in time,
+                                  each part with its options: ``realsense+lepton``,
+                                  ``realsense:123456+boson:/dev/video2`` (a RealSense file
+                                  cannot be paired with a live camera: their clocks differ)
+``recording:PATH``                a thermodepth recording (zarr), replayed bit for bit
+``folder:PATH``                   a folder of images from any rig (rig.yaml, frames.csv)
+================================  =========================================================
 
+A camera's N is its /dev/videoN (``2`` or ``/dev/video2``; none: the first of its kind found).
 Parts are joined by a '+' followed by a source name, so a '+' inside a file name is kept
 (:func:`split_spec`). Every source yields :class:`~thermodepth.frames.FramePair` when iterated
 (if it has both streams; otherwise a one-line InputError) and
@@ -30,25 +39,46 @@ from typing import Any
 
 from ..calibration import Calibration
 from ..errors import FieldError, InputError, ThermodepthError
+from ..frames import parse_depth_mode
 from .base import DeviceLostError, Source, event_time_s, with_device_depth
 from .pairing import DEFAULT_MAX_SKEW_S, PairingStats, StreamPairer, pair_times
 
 SPEC_HELP = (
-    "sim, realsense[:SERIAL|:FILE.bag|:FILE.db3], lepton[:INDEX], realsense+lepton, recording:PATH"
+    "sim[:thermal=CAMERA,depth=WxH], realsense[:SERIAL|:FILE.bag|:FILE.db3], lepton[:N], "
+    "p2pro[:N], boson[:N], DEPTH+THERMAL (realsense+lepton, realsense+p2pro, ...), "
+    "recording:PATH, folder:PATH"
 )
-SOURCE_KINDS = ("sim", "realsense", "lepton", "recording")
+DEPTH_CAMERAS = ("realsense",)
+THERMAL_CAMERAS = ("lepton", "p2pro", "boson")
+SOURCE_KINDS = ("sim", *DEPTH_CAMERAS, *THERMAL_CAMERAS, "recording", "folder")
 _JOIN = re.compile(r"\+(?=(?:" + "|".join(SOURCE_KINDS) + r")(?::|\+|$))")
 """A '+' that joins two source specs: one followed by a source name (so that a '+' inside a
 file name, as in ``realsense:take+1.db3``, is left alone)."""
+SIM_KEYS = ("thermal", "depth")
 
 
 def split_spec(spec: str) -> list[tuple[str, str]]:
     """A source spec as ``(kind, argument)`` parts: ``"realsense:123+lepton:2"`` ->
     ``[("realsense", "123"), ("lepton", "2")]``. Parts are joined by a '+' followed by a
-    source name; a ``recording:PATH`` spec is never split."""
+    source name; a ``recording:PATH`` or ``folder:PATH`` spec is never split."""
     text = spec.strip()
-    parts = [text] if text.startswith("recording:") else _JOIN.split(text)
+    whole = text.startswith(("recording:", "folder:"))
+    parts = [text] if whole else _JOIN.split(text)
     return [(kind, arg) for kind, _, arg in (part.partition(":") for part in parts)]
+
+
+def sim_options(arg: str) -> dict[str, str]:
+    """The ``KEY=VALUE,...`` of a ``sim:`` spec; FieldError (``source``) for a key it does
+    not know."""
+    options: dict[str, str] = {}
+    for item in filter(None, (x.strip() for x in arg.split(","))):
+        key, eq, value = item.partition("=")
+        if not eq or key not in SIM_KEYS or not value:
+            raise FieldError(
+                "source", f"sim:{arg}: expected KEY=VALUE with KEY one of {', '.join(SIM_KEYS)}"
+            )
+        options[key] = value
+    return options
 
 
 def _is_file_arg(arg: str) -> bool:
@@ -57,22 +87,45 @@ def _is_file_arg(arg: str) -> bool:
     return bool(arg) and Path(arg).suffix.lower() in PLAYBACK_EXTENSIONS
 
 
-def _realsense(arg: str, with_ir: bool, warn: Callable[[str], None] | None) -> Any:
+def _realsense(
+    arg: str, with_ir: bool, warn: Callable[[str], None] | None, depth_mode: str | None
+) -> Any:
     from .realsense import RealSenseCamera
 
+    mode = None
+    if depth_mode is not None:
+        w, h, fps = parse_depth_mode(depth_mode)
+        mode = (w, h, round(fps or 30))
     if _is_file_arg(arg):
-        return RealSenseCamera(path=arg, with_ir=with_ir, warn=warn)
+        return RealSenseCamera(path=arg, mode=mode, with_ir=with_ir, warn=warn)
     if arg and not arg.isalnum():
         raise InputError(f"realsense:{arg}: expected a serial number or a .bag/.db3 file")
-    return RealSenseCamera(serial=arg or None, with_ir=with_ir, warn=warn)
+    return RealSenseCamera(serial=arg or None, mode=mode, with_ir=with_ir, warn=warn)
 
 
-def _lepton(arg: str, latency_s: float) -> Any:
-    from .lepton import LeptonCamera
+def _thermal_camera(
+    kind: str,
+    arg: str,
+    latency_s: float,
+    calibration: Calibration | None,
+    warn: Callable[[str], None] | None,
+) -> Any:
+    """The thermal camera ``kind:arg`` names (:data:`THERMAL_CAMERAS`)."""
+    from .uvc import device_index
 
-    if arg and not arg.isdigit():
-        raise InputError(f"lepton:{arg}: expected a video device number (lepton:0 = /dev/video0)")
-    return LeptonCamera(int(arg) if arg else None, latency_s=latency_s)
+    index = device_index(kind, arg)
+    if kind == "lepton":
+        from .lepton import LeptonCamera
+
+        return LeptonCamera(index, latency_s=latency_s, warn=warn)
+    if kind == "p2pro":
+        from .infiray import P2ProCamera
+
+        return P2ProCamera(index, latency_s=latency_s, warn=warn)
+    from .boson import BosonCamera
+
+    output = calibration.thermal_output if calibration is not None else None
+    return BosonCamera(index, output, latency_s=latency_s, warn=warn)
 
 
 def _device_calibration(camera: Any, calibration: Calibration | None) -> Calibration | None:
@@ -126,39 +179,58 @@ def open_source(
     with_ir: bool = False,
     thermal_latency_s: float = 0.0,
     warn: Callable[[str], None] | None = None,
+    depth_mode: str | None = None,
+    thermal_camera: str | None = None,
 ) -> Source:
     """Open the source a spec names (table above); bad specs and missing devices raise a
-    one-line InputError (``realsense+lepton`` names every camera missing).
+    one-line InputError (a pair of cameras names every camera missing).
 
-    calibration: the user's calibration (thermal intrinsics, extrinsics); RealSense sources
-    replace its depth section with the device's intrinsics and depth unit, and so does a
-    recording made without a calibration (with the device's it holds). frames: for ``sim``,
-    how many pairs (None: endless). max_skew_s: the pairing threshold of
-    ``realsense+lepton``. with_ir: also read the depth camera's infrared image.
-    thermal_latency_s: subtracted from the Lepton's frame arrival times (0: not calibrated;
-    see :mod:`.lepton`). warn: where one-line warnings go (a recording's skipped frames, a
-    RealSense stream that restarted, a calibration given to a source that keeps its own).
+    calibration: the user's calibration (thermal intrinsics, extrinsics, the thermal
+    camera's output); RealSense sources replace its depth section with the device's
+    intrinsics and depth unit, and so does a recording made without a calibration (with the
+    device's it holds). frames: for ``sim``, how many pairs (None: endless). max_skew_s: the
+    pairing threshold of two live cameras (and of a folder with times). with_ir: also read
+    the depth camera's infrared image. thermal_latency_s: subtracted from a thermal camera's
+    frame arrival times (0: not calibrated). warn: where one-line warnings go (a recording's
+    skipped frames, a RealSense stream that restarted, a calibration given to a source that
+    keeps its own, a folder's bad rows, a camera's missing telemetry). depth_mode: the depth
+    camera's mode, ``WxH[@FPS]`` (a RealSense's, the simulator's); thermal_camera: the
+    simulated thermal camera (``sim`` only: live cameras are named in the spec).
     """
     from .paired import PairedSource, StreamSource
 
     text = spec.strip()
     parts = split_spec(text)
     kind, arg = parts[0]
+    if thermal_camera is not None and kind != "sim":
+        raise FieldError(
+            "thermal_camera",
+            f"chooses the simulated thermal camera (--source sim); {text} names its cameras "
+            "itself (realsense+p2pro, ...)",
+        )
     if len(parts) > 1:
-        if [k for k, _ in parts] != ["realsense", "lepton"]:
-            raise FieldError("source", f"cannot combine {text!r}; expected realsense+lepton")
-        rs_arg, lepton_arg = parts[0][1], parts[1][1]
+        kinds = [k for k, _ in parts]
+        if len(parts) != 2 or kinds[0] not in DEPTH_CAMERAS or kinds[1] not in THERMAL_CAMERAS:
+            raise FieldError(
+                "source",
+                f"cannot combine {text!r}; expected a depth camera and a thermal camera, "
+                f"DEPTH+THERMAL with DEPTH one of {', '.join(DEPTH_CAMERAS)} and THERMAL one of "
+                f"{', '.join(THERMAL_CAMERAS)}",
+            )
+        (_, rs_arg), (thermal_kind, thermal_arg) = parts
         if _is_file_arg(rs_arg):
             raise FieldError(
                 "source",
-                f"{text}: a RealSense file cannot be paired with a live Lepton (the "
+                f"{text}: a RealSense file cannot be paired with a live thermal camera (the "
                 "file's times are not the live clock); record the file alone, or use "
-                "realsense[:SERIAL]+lepton",
+                f"realsense[:SERIAL]+{thermal_kind}",
             )
         depth_cam, thermal_cam = _open_both(
             [
-                lambda: _realsense(rs_arg, with_ir, warn),
-                lambda: _lepton(lepton_arg, thermal_latency_s),
+                lambda: _realsense(rs_arg, with_ir, warn, depth_mode),
+                lambda: _thermal_camera(
+                    thermal_kind, thermal_arg, thermal_latency_s, calibration, warn
+                ),
             ],
             text,
         )
@@ -169,19 +241,29 @@ def open_source(
             ),
         )
     if kind == "sim":
-        if arg:
-            raise FieldError("source", f"'sim' takes no argument, got {text!r}")
         from .sim import SimSource
 
-        src = SimSource(frames=frames)
+        options = sim_options(arg)
+        src = SimSource(
+            frames=frames,
+            thermal=options.get("thermal", thermal_camera),
+            depth=options.get("depth", depth_mode),
+        )
         if with_ir:
             src.rig.with_ir = True
         if calibration is not None:
             _calibration_unused(text, "the simulated rig", warn)
         return src
-    if kind == "recording":
+    if kind in ("recording", "folder"):
         if not arg:
-            raise FieldError("source", "recording:PATH needs a path")
+            raise FieldError("source", f"{kind}:PATH needs a path")
+        if kind == "folder":
+            from .folder import FolderSource
+
+            folder = FolderSource(arg, warn, max_skew_s)
+            if calibration is not None:
+                _calibration_unused(text, f"the folder ({folder.folder / 'rig.yaml'})", warn)
+            return folder
         from .replay import RecordingSource
 
         replay = RecordingSource(arg, warn, calibration)
@@ -189,31 +271,34 @@ def open_source(
             _calibration_unused(text, "the recording", warn)
         return replay
     if kind == "realsense":
-        cam = _realsense(arg, with_ir, warn)
+        cam = _realsense(arg, with_ir, warn, depth_mode)
         return _closing_on_error(
             [cam], lambda: StreamSource(cam, "depth", _device_calibration(cam, calibration))
         )
-    if kind == "lepton":
-        return StreamSource(_lepton(arg, thermal_latency_s), "thermal", calibration)
+    if kind in THERMAL_CAMERAS:
+        thermal = _thermal_camera(kind, arg, thermal_latency_s, calibration, warn)
+        return StreamSource(thermal, "thermal", calibration)
     raise FieldError("source", f"unknown {text!r}; expected one of {SPEC_HELP}")
 
 
 def list_devices() -> dict[str, Any]:
     """What is attached: ``{"realsense": [...], "realsense_unavailable": None or why,
-    "purethermal": [...], "video": [...]}`` (``realsense_unavailable`` says why RealSense
-    devices cannot be listed: pyrealsense2 missing or not importable)."""
-    from .lepton import list_purethermal, list_video_devices
+    "thermal": [...] (each a capture node with its ``kind``: lepton, p2pro, boson), "video":
+    [...] (every capture node)}`` (``realsense_unavailable`` says why RealSense devices cannot
+    be listed: pyrealsense2 missing or not importable)."""
     from .realsense import list_realsense
+    from .uvc import list_video_devices
 
     try:
         realsense, unavailable = list_realsense(), None
     except ThermodepthError as exc:
         realsense, unavailable = [], str(exc)
+    video = list_video_devices()
     return {
         "realsense": realsense,
         "realsense_unavailable": unavailable,
-        "purethermal": list_purethermal(),
-        "video": list_video_devices(),
+        "thermal": [d for d in video if d["kind"] is not None],
+        "video": video,
     }
 
 

@@ -1,13 +1,18 @@
 """Intel RealSense depth through pyrealsense2: a live camera or a recorded file.
 
-Live: depth 1280x720 Z16 at 30 fps (a D435's native mode), optionally the left infrared
-imager (Y8, same size, pixel-aligned with depth). Files: librealsense recordings, ROS1 ``.bag``
-(what librealsense wrote up to 2.5x) or rosbag2 ``.db3`` (what pyrealsense2 2.59 writes),
-played back as fast as they are read (non-real-time: no frame is skipped).
+Live: any Z16 depth mode (``--depth-mode 848x480@30``); by default the one Intel recommends for
+the camera: 848x480 at 30 fps on the D435, D435i, D455 and D405 (their 1280x720 is
+interpolated from the 1280x800 imagers and measures no better: librealsense issue 11180,
+Intel's "Tuning depth cameras for best performance"), 1280x720 on the D415. Optionally the
+left infrared imager at the same mode (Y8, pixel-aligned with depth). Files: librealsense
+recordings, ROS1 ``.bag`` (what librealsense wrote up to 2.5x) or rosbag2 ``.db3`` (what
+pyrealsense2 2.59 writes), of any depth mode, played back as fast as they are read
+(non-real-time: no frame is skipped).
 
-At the edge: the device's depth intrinsics and depth unit (metres per Z16 count) go into the
-calibration (:func:`depth_section`, :func:`~.base.with_device_depth`) and, always, into
-recordings (``device_depth``); frame timestamps in milliseconds become seconds.
+At the edge: the device's depth intrinsics and depth unit (metres per Z16 count, read from the
+device, never assumed: a D405 counts 0.1 mm) go into the calibration (:func:`depth_section`,
+:func:`~.base.with_device_depth`) and, always, into recordings (``device_depth``); frame
+timestamps in milliseconds become seconds.
 Live frames carry librealsense's global time (host clock, ms since the epoch), which is the
 clock the Lepton source stamps its frames with (``time.time()``); frames of a hardware clock
 domain are stamped with their host arrival time instead.
@@ -30,9 +35,20 @@ from ..errors import InputError, ThermodepthError
 from ..frames import DepthFrame
 from .base import DeviceGuard, DeviceLostError
 
-DEPTH_SIZE = (1280, 720)
 DEPTH_FPS = 30
 PLAYBACK_EXTENSIONS = (".bag", ".db3")
+DEFAULT_MODES = {"D415": (1280, 720, 30)}
+"""The default depth mode of the cameras whose best is not 848x480 at 30 fps (by the model
+in the device's name)."""
+RECOMMENDED_MODE = (848, 480, 30)
+
+
+def default_mode(device_name: str) -> tuple[int, int, int]:
+    """The depth mode thermodepth opens a camera in unless told: Intel's recommended one
+    (848x480 at 30 fps; 1280x720 on a D415)."""
+    return next(
+        (mode for model, mode in DEFAULT_MODES.items() if model in device_name), RECOMMENDED_MODE
+    )
 
 
 def import_realsense() -> Any:
@@ -100,8 +116,9 @@ class RealSenseCamera:
     """Depth frames from a RealSense device or file, as :class:`~thermodepth.frames.DepthFrame`.
 
     serial: pick a device (default: the first); path: play a ``.bag`` / ``.db3`` file instead;
-    size / fps: the depth mode expected (1280x720 at 30 by default; a file whose depth stream
-    differs is refused with both named); with_ir: also read the left infrared imager;
+    mode: the depth mode (width, height, fps; None: the camera's recommended one,
+    :func:`default_mode`, or a file's own; a file whose depth stream differs from a mode
+    given is refused with both named); with_ir: also read the left infrared imager;
     timeout_s: a live camera that delivers no new frame for this long counts as unplugged;
     warn: where the one warning about a restarted stream goes (default: ``warnings.warn``).
     After opening: ``intrinsics`` (depth), ``depth_scale_m``, ``serial``, ``live``,
@@ -121,8 +138,7 @@ class RealSenseCamera:
         self,
         serial: str | None = None,
         path: str | Path | None = None,
-        size: tuple[int, int] = DEPTH_SIZE,
-        fps: int = DEPTH_FPS,
+        mode: tuple[int, int, int] | None = None,
         with_ir: bool = False,
         timeout_s: float = 5.0,
         warn: Callable[[str], None] | None = None,
@@ -130,7 +146,7 @@ class RealSenseCamera:
         if path is not None:  # a file that cannot be played says so, pyrealsense2 or not
             check_playback_file(Path(path))
         rs = self.rs = import_realsense()
-        self.size, self.fps, self.with_ir, self.timeout_s = size, fps, with_ir, timeout_s
+        self.mode, self.with_ir, self.timeout_s = mode, with_ir, timeout_s
         self.warn = warn or (lambda msg: warnings.warn(msg, stacklevel=2))
         self.path = None if path is None else Path(path)
         self.live = self.path is None
@@ -170,7 +186,9 @@ class RealSenseCamera:
         if serial:
             config.enable_device(serial)
             self.name = f"realsense:{serial}"
-        (w, h), fps = self.size, self.fps
+        device = next(d for d in attached if not serial or d["serial"] == serial)
+        self.mode = self.mode or default_mode(device["name"])
+        w, h, fps = self.mode
         config.enable_stream(rs.stream.depth, w, h, rs.format.z16, fps)
         if self.with_ir:
             config.enable_stream(rs.stream.infrared, 1, w, h, rs.format.y8, fps)
@@ -178,15 +196,14 @@ class RealSenseCamera:
             return self.pipeline.start(config)
         except RuntimeError as exc:
             raise InputError(
-                f"RealSense {serial or attached[0]['serial']}: cannot stream depth {w}x{h} Z16 "
-                f"at {fps} fps{' + IR Y8' if self.with_ir else ''} ({exc}); expected a "
-                "D435-class camera on USB 3"
+                f"RealSense {device['name']} {device['serial']}: cannot stream depth {w}x{h} "
+                f"Z16 at {fps} fps{' + IR Y8' if self.with_ir else ''} ({exc}); choose a mode "
+                "it offers (--depth-mode WxH@FPS; 848x480@30 for a D435 on USB 3)"
             ) from None
 
     def _describe(self, profile: Any) -> None:
-        """Check a file's streams; read the serial, depth intrinsics and depth unit."""
+        """Check a file's streams; read the serial, the mode, depth intrinsics and unit."""
         rs = self.rs
-        (w, h), fps = self.size, self.fps
         device = profile.get_device()
         if self.path is not None:
             self._playback = device.as_playback()
@@ -194,13 +211,17 @@ class RealSenseCamera:
             streams = list(profile.get_streams())
             depth = [s for s in streams if s.stream_type() == rs.stream.depth]
             if not depth:
-                found = ", ".join(_describe(s) for s in streams) or "no video streams"
-                raise InputError(f"{self.path}: no depth stream in this recording (found {found})")
+                there = ", ".join(_describe(s) for s in streams) or "no video streams"
+                raise InputError(f"{self.path}: no depth stream in this recording (found {there})")
             vp = depth[0].as_video_stream_profile()
-            if (vp.width(), vp.height(), depth[0].format()) != (w, h, rs.format.z16):
+            mode = (vp.width(), vp.height(), int(depth[0].fps()))
+            wanted = self.mode or mode
+            if depth[0].format() != rs.format.z16 or mode[:2] != wanted[:2]:
                 raise InputError(
-                    f"{self.path}: expected depth {w}x{h} Z16, found {_describe(depth[0])}"
+                    f"{self.path}: expected depth {wanted[0]}x{wanted[1]} Z16, found "
+                    f"{_describe(depth[0])}"
                 )
+            self.mode = mode
             self.with_ir = self.with_ir and any(
                 s.stream_type() == rs.stream.infrared for s in streams
             )
@@ -209,6 +230,8 @@ class RealSenseCamera:
         self.intrinsics = intrinsics_from_rs(dp.get_intrinsics())
         self.depth_scale_m = float(device.first_depth_sensor().get_depth_scale())
         self.device_depth = depth_section(self.intrinsics, self.depth_scale_m)
+        assert self.mode is not None
+        w, h, fps = self.mode
         self.settings = {
             "serial": self.serial,
             "depth": f"{w}x{h} Z16 at {fps} fps",

@@ -1,4 +1,4 @@
-"""Lepton telemetry: split 160x122 frames into image and telemetry rows, decode the rows.
+"""Lepton telemetry: split frames into image and telemetry rows, decode the rows.
 
 Pure functions over ``uint16`` words, tested on rows built byte for byte from the layout.
 
@@ -38,8 +38,9 @@ show every frame as "in progress" between FFCs: check ``in_ffc`` on a first reco
 
 Row C (words 160-239 of the telemetry block): word 48 TLinear enable state (Lepton 2.5 / 3.5),
 word 49 TLinear resolution (0: 0.1 K per count, 1: 0.01 K per count). With TLinear on, the
-image holds kelvin x 100 (or x 10), not raw counts: :class:`~.lepton.LeptonCamera` refuses
-such frames.
+image holds kelvin x 100 (or x 10), not raw counts: the frame's telemetry says so, and the
+radiometry reads it as the camera's own temperature
+(:func:`~thermodepth.frames.thermal_output`).
 
 Word order of 32-bit fields: two consecutive words, **least significant word first** (word n
 holds bits 0-15, word n + 1 bits 16-31), as the IDD's telemetry tables list them and as the
@@ -47,10 +48,12 @@ periph.io driver reads them ("big-endian 16-bit words, little-endian word order"
 Within a word, PureThermal's Y16 UVC stream delivers the value in host byte order (the frame
 is read as ``uint16`` like the image), so this module works on word *values*.
 
-Where the rows sit: on a Lepton 3 with telemetry enabled each frame has 122 rows of 160
-words; the 240 telemetry words (rows A, B, C) plus 80 reserved fill two rows: row A | row B,
-then row C | reserved. The Lepton puts them first (``header``) or last (``footer``, the
-location PureThermal firmware configures and the default here).
+Where the rows sit: on a Lepton 3 / 3.5 (160x120) with telemetry enabled each frame has 122
+rows of 160 words; the 240 telemetry words (rows A, B, C) plus 80 reserved fill two rows: row
+A | row B, then row C | reserved. On a Lepton 2.x (80x60: 2.0, 2.5) each telemetry row is an
+image row of its own: 63 rows of 80 words. The Lepton puts them first (``header``) or last
+(``footer``, the location PureThermal firmware configures and the default here). A frame of
+the image's size alone has no telemetry (telemetry disabled).
 """
 
 from __future__ import annotations
@@ -69,6 +72,18 @@ IMAGE_SHAPE = (120, 160)
 """Lepton 3 image, rows x columns."""
 FRAME_SHAPE = (122, 160)
 """Lepton 3 frame with telemetry rows, as PureThermal delivers it over UVC Y16."""
+TELEMETRY_ROWS = {160: 2, 80: 3}
+"""Telemetry rows a frame carries, by image width: the Lepton 3's 160 (2), the Lepton 2's 80
+(rows A, B and C, one each)."""
+IMAGE_SHAPES = {160: (120, 160), 80: (60, 80)}
+"""The Lepton images by width: Lepton 3 / 3.5 / 3.1R, Lepton 2.0 / 2.5."""
+FRAME_SHAPES = (
+    (122, 160),
+    (120, 160),
+    (63, 80),
+    (60, 80),
+)
+"""Every Y16 frame a PureThermal delivers: each image with its telemetry rows, and alone."""
 
 TelemetryLocation = Literal["footer", "header"]
 
@@ -114,7 +129,8 @@ def parse_telemetry(row_words: NDArray[np.uint16]) -> Telemetry:
     """Decode Lepton telemetry words into :class:`~thermodepth.frames.Telemetry` (SI units).
 
     row_words: uint16 word values, at least row A (80 words); with rows B and C (240 words or
-    more, e.g. the 320 words of :func:`split_frame`) the TLinear state is read from row C.
+    more: the 320 of a Lepton 3 frame, the 240 of a Lepton 2's, :func:`split_frame`) the
+    TLinear state and resolution are read from row C.
     Raises :class:`TelemetryError` when the words cannot be telemetry: fewer than 80 words,
     an all-zero row A (telemetry disabled) or an FPA temperature outside
     :data:`FPA_TEMP_RANGE_K`. The housing temperature is NaN (reserved on the Lepton 3); the
@@ -133,7 +149,7 @@ def parse_telemetry(row_words: NDArray[np.uint16]) -> Telemetry:
     row_a = words[:ROW_WORDS]
     if not row_a.any():
         raise TelemetryError(
-            "telemetry: row A is all zeros (is telemetry enabled? expected 160x122 frames)"
+            "telemetry: row A is all zeros (is telemetry enabled? expected 160x122 or 80x63 frames)"
         )
     fpa_ck = int(row_a[W_FPA_TEMP_CK])
     fpa_k = centikelvin_to_k(fpa_ck)
@@ -170,29 +186,27 @@ def parse_telemetry(row_words: NDArray[np.uint16]) -> Telemetry:
 
 def split_frame(
     frame: NDArray[np.uint16], location: TelemetryLocation = "footer"
-) -> tuple[NDArray[np.uint16], NDArray[np.uint16]]:
-    """Split a 160x122 Lepton 3 frame into its (120, 160) image and its 320 telemetry words.
+) -> tuple[NDArray[np.uint16], NDArray[np.uint16] | None]:
+    """Split a Lepton frame into its image ((120, 160) or (60, 80)) and its telemetry words
+    (320 or 240; None: a frame of the image alone, telemetry disabled).
 
-    location: ``"footer"`` (the last two rows; PureThermal's setting) or ``"header"`` (the
-    first two). Raises InputError naming the expected shape and dtype otherwise.
+    location: ``"footer"`` (the last rows; PureThermal's setting) or ``"header"`` (the first).
+    Raises InputError naming the shapes expected, and the dtype, otherwise.
     """
     arr = np.asarray(frame)
-    if arr.shape != FRAME_SHAPE:
-        h, w = FRAME_SHAPE
+    if arr.ndim != 2 or arr.shape not in FRAME_SHAPES:
         got = f"{arr.shape[1]}x{arr.shape[0]}" if arr.ndim == 2 else f"shape {arr.shape}"
-        hint = (
-            " (no telemetry rows: enable the Lepton's telemetry)"
-            if arr.shape == IMAGE_SHAPE
-            else ""
-        )
         raise InputError(
-            f"Lepton frame: expected {w}x{h} Y16 (160x120 image + 2 telemetry rows), "
-            f"got {got}{hint}"
+            "Lepton frame: expected 160x122 or 80x63 Y16 (the image and its telemetry rows), "
+            f"or the image alone (160x120, 80x60), got {got}"
         )
     if arr.dtype != np.uint16:
         raise InputError(f"Lepton frame: expected 16-bit Y16 pixels (uint16), got {arr.dtype}")
+    image_rows = IMAGE_SHAPES[arr.shape[1]][0]
+    if arr.shape[0] == image_rows:
+        return arr, None
     if location == "footer":
-        return arr[: IMAGE_SHAPE[0]], arr[IMAGE_SHAPE[0] :].reshape(-1)
+        return arr[:image_rows], arr[image_rows:].reshape(-1)
     if location == "header":
-        return arr[2:], arr[:2].reshape(-1)
+        return arr[arr.shape[0] - image_rows :], arr[: arr.shape[0] - image_rows].reshape(-1)
     raise InputError(f"telemetry location: expected 'footer' or 'header', got {location!r}")
