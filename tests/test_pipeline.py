@@ -33,6 +33,7 @@ from thermodepth.pipeline import (
 from thermodepth.registration import Reason, Registration
 from thermodepth.schema import PlanckSchema
 from thermodepth.sim import Rig, camera_pose, constant_fpa, default_calibration, plate_scene
+from thermodepth.sim.cameras import THERMAL_CAMERAS
 
 runner = CliRunner()
 CHIP = np.array([0.06, -0.05, -0.003])  # the chip's centre in the world (plate at the origin)
@@ -641,3 +642,65 @@ def test_replay_uses_the_recorded_device_depth_with_the_users_calibration(
     # without one of the user's, nothing to fuse with: one line
     res = runner.invoke(app, ["run", "--source", f"recording:{tmp_path / 'd.zarr'}"])
     assert res.exit_code == 2 and "no calibration: give one in the settings" in res.output
+
+
+# -- any camera: its own temperature as pixels, no sensor temperature, other depth units -------
+
+
+def test_a_camera_reading_its_own_temperature_measures_as_one_giving_counts(
+    generalisation: Generalisation,
+) -> None:
+    # the same scene, lens and sensor state through a sensor giving 14-bit counts and one
+    # giving TLinear (a Lepton 3.5's 0.01 K): the same temperatures, to the quantisation
+    model = generalisation.models["radiance"]
+    got = {}
+    for camera in ("lepton3", "lepton3.5"):
+        sensor = THERMAL_CAMERAS[camera].sensor
+        cal = replace(default_calibration(), thermal_output=sensor.output)
+        rig = inspection_rig(1.0, calibration=cal, lepton=sensor, seed=3)
+        pair = rig.frame()
+        assert pair.telemetry.tlinear == (camera == "lepton3.5")
+        got[camera] = Pipeline(Settings(), rig.calibration, model=model).process(pair)
+    a, b = got["lepton3"].temp_thermal_c, got["lepton3.5"].temp_thermal_c
+    assert np.nanmedian(np.abs(a - b)) < 0.01  # noise draws alike, 0.01 K steps
+    assert np.nanmax(np.abs(a - b)) < 0.05
+    assert got["lepton3.5"].hotspots[0].max_c == pytest.approx(
+        got["lepton3"].hotspots[0].max_c, abs=0.05
+    )
+
+
+def test_frames_without_a_sensor_temperature_are_compensated_at_the_models_reference(
+    generalisation: Generalisation,
+) -> None:
+    model = generalisation.models["radiance"]  # fitted with the VOx temperature
+    rig = Rig.of_cameras(plate_scene(39.0), camera_pose(1.0), "p2pro", "848x480", start_s=1.0)
+    pair = rig.frame()
+    assert np.isnan(pair.telemetry.fpa_temp_k)
+    f = Pipeline(Settings(), rig.calibration, model=model).process(pair)
+    assert np.all(f.flags_thermal & PixelFlag.NO_VOX)
+    assert np.isnan(f.vox_temp_c) and np.isfinite(f.temp_thermal_c).mean() > 0.99
+    at_reference = model.from_counts(
+        pair.thermal.astype(np.float64),
+        model.vox_reference_c,
+        f.range_thermal_m,
+        Pipeline(Settings(), rig.calibration, model=model).radiometry_of(pair),
+    ).temp_c
+    seen = np.isfinite(f.range_thermal_m)  # the others at the fallback distance
+    assert seen.mean() > 0.9
+    assert np.allclose(f.temp_thermal_c[seen], at_reference[seen], atol=1e-4)
+    plain = Pipeline(Settings(), rig.calibration).process(pair)  # physics only: no VOx used
+    assert not np.any(plain.flags_thermal & PixelFlag.NO_VOX)
+
+
+def test_depth_in_tenths_of_millimetres_measures_the_same() -> None:
+    # a D405 counts 0.1 mm: nothing may assume the D435's 1 mm
+    rig = inspection_rig(1.0)
+    fine = replace(rig.calibration, depth_scale_m=0.0001)
+    rig_fine = inspection_rig(1.0, calibration=fine)
+    coarse, tenths = rig.frame(), rig_fine.frame()
+    assert np.median(tenths.depth[tenths.depth > 0]) > 9000
+    a = Pipeline(Settings(), rig.calibration).process(coarse)
+    b = Pipeline(Settings(), fine).process(tenths)
+    assert np.nanmedian(np.abs(a.range_thermal_m - b.range_thermal_m)) < 0.001
+    assert a.hotspots[0].distance_m == pytest.approx(b.hotspots[0].distance_m, abs=0.002)
+    assert a.hotspots[0].max_c == pytest.approx(b.hotspots[0].max_c, abs=0.05)

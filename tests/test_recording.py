@@ -44,6 +44,7 @@ from thermodepth.io.recording import (
 )
 from thermodepth.io.recording.chunks import ChunkError, FrameChunks
 from thermodepth.io.recording.reader import READ_AHEAD
+from thermodepth.radiometry import ThermalOutput
 from thermodepth.session import record_session
 from thermodepth.sim import Rig, camera_pose, plate_scene
 from thermodepth.sources import open_source
@@ -485,6 +486,18 @@ def test_version_1_recordings_replay_and_other_versions_are_refused(tmp_path: Pa
     refused = r"recording version 3 is not supported \(.* reads versions 1, 2\)"
     with pytest.raises(InputError, match=refused):
         Recording(out)
+
+
+def test_the_thermal_output_is_recorded_and_old_recordings_read_as_counts(tmp_path: Path) -> None:
+    out = tmp_path / "boson.zarr"
+    src = SimSource(thermal="boson640", depth="848x480")  # TLinear that only the file says
+    record_session(src, out, frames=2)
+    assert Recording(out).calibration.thermal_output == ThermalOutput.kelvin_per(0.01)
+    root = zarr.open_group(str(out), mode="r+")
+    calibration = dict(root.attrs["calibration"])
+    calibration["thermal"] = {k: v for k, v in calibration["thermal"].items() if k != "output"}
+    root.attrs["calibration"] = calibration  # as recordings made before thermal.output
+    assert Recording(out).calibration.thermal_output == ThermalOutput()
 
 
 def test_frames_are_read_from_their_chunk_files_as_zarr_reads_them(tmp_path: Path) -> None:

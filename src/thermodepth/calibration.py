@@ -32,7 +32,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from .camera import Intrinsics, RigidTransform, is_rotation
-from .errors import InputError
+from .errors import FieldError, InputError
 from .radiometry import RAW_COUNTS, ThermalOutput
 from .schema import Finite, StrictSchema, read_mapping, validated, write_mapping
 
@@ -120,6 +120,28 @@ class CalibrationSchema(StrictSchema):
     thermal_from_depth: TransformSchema
     # a file of another version would be read wrongly: refused, as model files are
     schema_version: Literal[1] = SCHEMA_VERSION
+
+
+def parse_output(text: str) -> ThermalOutput:
+    """``counts`` (14 bits), ``counts:BITS``, or ``kelvin:SCALE[:OFFSET]`` (kelvin = value x
+    SCALE + OFFSET) -> :class:`~thermodepth.radiometry.ThermalOutput`; FieldError
+    (``thermal_output``) otherwise."""
+    kind, _, rest = text.strip().partition(":")
+    try:
+        numbers = [float(x) for x in rest.split(":")] if rest else []
+        if kind == "counts" and len(numbers) <= 1:
+            bits = numbers[0] if numbers else 14.0
+            if not bits.is_integer():
+                raise ValueError
+            return ThermalOutput(bits=int(bits))
+        if kind == "kelvin" and 1 <= len(numbers) <= 2:
+            return ThermalOutput.kelvin_per(*numbers)
+    except ValueError:
+        pass
+    raise FieldError(
+        "thermal_output",
+        f"{text!r}: expected counts, counts:BITS or kelvin:SCALE[:OFFSET] (e.g. kelvin:0.01)",
+    )
 
 
 def intrinsics_of(cam: CameraSchema) -> Intrinsics:

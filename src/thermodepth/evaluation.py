@@ -85,15 +85,20 @@ def _score(
 
 
 def registration_error(
-    distance_m: float, method: str, seed: int = 0, depth_noise: bool = True
+    distance_m: float,
+    method: str,
+    seed: int = 0,
+    depth_noise: bool = True,
+    calibration: Calibration | None = None,
 ) -> RegistrationError:
-    """Registration error of ``method`` for a wall facing the rig at ``distance_m``.
+    """Registration error of ``method`` for a wall facing the rig at ``distance_m`` (the rig's
+    ``calibration``: None, the default cameras'; :func:`~.sim.cameras.rig_calibration`).
 
     Positions: ``"reproject"`` deprojects each measured depth and projects it into the thermal
     camera (what its kernels compute, in float64); ``"paper"`` uses its affine upscale map.
     The nearest-pixel check runs the method's own ``thermal_to_depth`` on an index image.
     """
-    cal = default_calibration()
+    cal = calibration or default_calibration()
     frame, truth = _wall(distance_m, seed, depth_noise, cal)
     return _score(Registration(cal, method), frame, truth, distance_m)
 
@@ -196,3 +201,85 @@ def compensation_generalisation(samples: int = 600, seed: int = 0) -> Generalisa
         "paper": PaperModel.fit(train, reference_temp_c=39.0),
     }
     return Generalisation(train, tests, models)
+
+
+# -- every camera: accuracy against truth, with and without the compensation -----------------
+
+
+@dataclass(frozen=True)
+class CameraAccuracy:
+    """How one simulated rig measures a plate of known temperature.
+
+    thermal, depth: the cameras; distance_m, vox_c: the plate's distance and the sensor's
+    temperature (C); error_none_c, error_radiance_c: the plate's mean reading (its central
+    thermal pixels, radiometry at each pixel's own distance) minus its true temperature,
+    without compensation of the sensor and with ours fitted on a sweep of the same camera
+    (C); registration_px: the median registration error at that distance (thermal px).
+    """
+
+    thermal: str
+    depth: str
+    distance_m: float
+    vox_c: float
+    error_none_c: float
+    error_radiance_c: float
+    registration_px: float
+
+
+CHECK_DISTANCES_M = (0.5, 1.0, 2.0, 3.0)
+CHECK_VOX_C = (26.0, 39.0)
+CHECK_PLATE_C = 45.0  # between the fitted 39 and 50 C, at distances beyond and between
+
+
+def camera_accuracy(
+    thermal: str,
+    depth: str = "848x480",
+    distances_m: Sequence[float] = CHECK_DISTANCES_M,
+    vox_c: Sequence[float] = CHECK_VOX_C,
+    samples: int = 200,
+    seed: int = 0,
+) -> list[CameraAccuracy]:
+    """:class:`CameraAccuracy` of a simulated camera pair at each distance and sensor
+    temperature: the compensation is fitted on the training sweep of that camera
+    (:func:`training_sweep`; a camera that tells no VOx temperature is fitted without it,
+    and the pipeline compensates its frames at the model's reference), then a plate at
+    :data:`CHECK_PLATE_C` is read by the pipeline at distances and sensor temperatures the
+    sweep did not hold exactly."""
+    from .pipeline import Pipeline, Settings
+    from .radiometry import ZERO_C_IN_K
+    from .sim import camera_pose, constant_fpa, plate_scene
+    from .sim.cameras import depth_mode, rig_calibration, thermal_camera
+    from .sim.protocols import plate_roi
+
+    train = _sweep(samples, seed * 10, vox_steps_c=TRAIN_VOX_STEPS_C, thermal_camera=thermal)
+    model = RadianceModel.fit(train)
+    cal = rig_calibration(thermal_camera(thermal), depth_mode(depth))
+    pipelines = {
+        "none": Pipeline(Settings(), cal),
+        "radiance": Pipeline(Settings(), cal, model=model),
+    }
+    out = []
+    for d in distances_m:
+        reg = registration_error(d, "reproject", seed, calibration=cal)
+        for v in vox_c:
+            rig = Rig.of_cameras(
+                plate_scene(CHECK_PLATE_C),
+                camera_pose(d),
+                thermal,
+                depth,
+                fpa=constant_fpa(v + ZERO_C_IN_K),
+                start_s=1.0,
+                seed=seed,
+            )
+            roi = plate_roi(rig, 1)
+            pair = rig.frame()
+            errors = {
+                name: float(np.nanmean(pipe.process(pair).temp_thermal_c[roi]) - CHECK_PLATE_C)
+                for name, pipe in pipelines.items()
+            }
+            out.append(
+                CameraAccuracy(
+                    thermal, depth, d, v, errors["none"], errors["radiance"], reg.median_px
+                )
+            )
+    return out

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,7 @@ from ..calibrate import (
     run_camera_calibration,
     write_report_json,
 )
-from ..calibration import Calibration, camera_dict
+from ..calibration import Calibration, camera_dict, parse_output
 from ..errors import FieldError
 from ..progress import SILENT, Reporter
 from ..schema import write_mapping
@@ -59,7 +59,9 @@ class CalibrateOptions:
     fixed (``calibrate-camera``'s file, or a calibration file); thermal_model, depth_model:
     distortion terms fitted;
     thermal_refine: thermal corner refinement; drop_outliers: fit again without the outlier
-    images; report_dir: where calib_report.json and .png go (default: beside ``out``).
+    images; report_dir: where calib_report.json and .png go (default: beside ``out``);
+    thermal_output: what the thermal camera's pixels are, written as ``thermal.output``
+    (:func:`~thermodepth.calibration.parse_output`: ``counts``, ``kelvin:0.01``, ...).
     """
 
     pairs_dir: Path
@@ -74,6 +76,7 @@ class CalibrateOptions:
     drop_outliers: bool = False
     report_dir: Path | None = None
     thermal_intrinsics: Path | None = None
+    thermal_output: str = "counts"
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,7 @@ def calibrate(options: CalibrateOptions, reporter: Reporter = SILENT) -> Calibra
     its report; bad input raises an InputError (FieldError for an option)."""
     o = options
     spec = BoardSpec.parse(o.board, o.square_m)
+    output = parse_output(o.thermal_output)
     fixed, scale = (None, None)
     if o.depth_intrinsics is not None:
         fixed, scale = load_intrinsics(o.depth_intrinsics, "depth")
@@ -115,6 +119,7 @@ def calibrate(options: CalibrateOptions, reporter: Reporter = SILENT) -> Calibra
             drop_outliers=o.drop_outliers,
             progress=advance,
         )
+    result = replace(result, calibration=replace(result.calibration, thermal_output=output))
     result.calibration.save(o.out)
     files = _report_files(o.out, o.report_dir)
     write_report_json(result, files[1])

@@ -10,7 +10,7 @@ from ..errors import FieldError, check_count
 from ..io.recording import check_output
 from ..palettes import PALETTES
 from ..progress import SILENT, Reporter
-from ..sim.lepton import LeptonModel
+from ..sim.cameras import depth_mode, thermal_camera
 from ..sim.protocols import (
     SCENES,
     ProtocolConfig,
@@ -35,6 +35,7 @@ def sweep(
     ``by_vox``, as Tables 1-5); the config is checked first (FieldError)."""
     check_count("samples", config.samples)
     _check_vox_range(config)
+    check_cameras(config.thermal_camera, None)
     if min(config.distances_m) <= 0:
         raise FieldError("distances_m", "must be positive")
     total = len(config.distances_m) * len(config.plate_temps_c)
@@ -52,13 +53,19 @@ def frames(
     count: int = 5,
     seed: int = 0,
     reporter: Reporter = SILENT,
+    camera: str | None = None,
+    depth: str | None = None,
 ) -> list[Path]:
-    """Frame pairs with ground truth (npz per frame) and the rig's calibration in ``out``."""
+    """Frame pairs with ground truth (npz per frame) and the rig's calibration in ``out``, of
+    the simulated cameras ``camera`` and ``depth`` (None: the Lepton 3, 1280x720)."""
     if scene not in SCENES:
         raise FieldError("scene", f"unknown {scene!r}; choose from {sorted(SCENES)}")
     check_count("frames", count)
+    check_cameras(camera, depth)
     with reporter.task("frames", count) as advance:
-        return write_frames(out, SCENES[scene](), distance_m, count, seed, advance)
+        return write_frames(
+            out, SCENES[scene](), distance_m, count, seed, advance, camera=camera, depth=depth
+        )
 
 
 def board_session(
@@ -71,19 +78,25 @@ def board_session(
     hold_s: float = 0.7,
     move_s: float = 0.35,
     reporter: Reporter = SILENT,
+    camera: str | None = None,
+    depth: str | None = None,
 ) -> Path:
     """A recording of a board shown to the rig, for ``capture-board``
-    (:func:`~thermodepth.sim.protocols.simulate_board_session`)."""
+    (:func:`~thermodepth.sim.protocols.simulate_board_session`), of the simulated cameras
+    ``camera`` and ``depth`` (None: the Lepton 3, 1280x720)."""
     spec = BoardSpec.parse(board, square_m)
     check_count("poses", poses)
     _check_style(style)
     _check_seconds(hold_s=hold_s, move_s=move_s)
+    check_cameras(camera, depth)
+    fps = thermal_camera(camera).sensor.fps
     check_output(out)
-    frames = session_frames(poses, hold_s, move_s, LeptonModel().fps)
+    frames = session_frames(poses, hold_s, move_s, fps)
     with reporter.task("board session", frames) as advance:
         return simulate_board_session(
-            out, spec, poses, seed, style, hold_s, move_s, progress=advance
-        )
+            out, spec, poses, seed, style, hold_s, move_s, progress=advance, camera=camera,
+            depth=depth,
+        )  # fmt: skip
 
 
 def protocol(out: Path, config: ProtocolConfig, reporter: Reporter = SILENT) -> Path:
@@ -94,9 +107,16 @@ def protocol(out: Path, config: ProtocolConfig, reporter: Reporter = SILENT) -> 
     check_count("pairs_per_distance", config.pairs_per_distance)
     _check_vox_range(config)
     _check_seconds(interval_s=config.interval_s, move_s=config.move_s)
+    check_cameras(config.thermal_camera, config.depth_mode)
     check_output(out)
     with reporter.task("protocol", config.pairs) as advance:
         return simulate_protocol(out, config, advance)
+
+
+def check_cameras(camera: str | None, depth: str | None) -> None:
+    """A FieldError for a thermal camera or a depth mode the simulator does not have."""
+    thermal_camera(camera)
+    depth_mode(depth)
 
 
 def _check_vox_range(config: SweepConfig | ProtocolConfig) -> None:
@@ -124,10 +144,13 @@ def targets(
     reporter: Reporter = SILENT,
     style: str = "bare",
     thermal_format: str = "counts",
+    camera: str | None = None,
+    depth: str | None = None,
 ) -> TargetCaptures:
     """Heated-board captures (IR + thermal per pose) for ``thermodepth calibrate``: a board
-    of ``style`` (:data:`~thermodepth.sim.scene.BOARD_STYLES`), thermal images saved as raw
-    counts or in a palette (``thermal_format``)."""
+    of ``style`` (:data:`~thermodepth.sim.scene.BOARD_STYLES`), thermal images saved as the
+    camera's raw values or in a palette (``thermal_format``), of the simulated cameras
+    ``camera`` and ``depth`` (None: the Lepton 3, 1280x720)."""
     spec = BoardSpec.parse(board, square_m)
     check_count("poses", poses)
     _check_style(style)
@@ -135,7 +158,16 @@ def targets(
         raise FieldError(
             "thermal_format", f"unknown {thermal_format!r}; choose counts or {', '.join(PALETTES)}"
         )
+    check_cameras(camera, depth)
     with reporter.task("targets", poses) as advance:
         return simulate_targets(
-            out, spec, poses, seed, progress=advance, style=style, thermal_format=thermal_format
+            out,
+            spec,
+            poses,
+            seed,
+            progress=advance,
+            style=style,
+            thermal_format=thermal_format,
+            camera=camera,
+            depth=depth,
         )

@@ -100,6 +100,16 @@ def calibrate_cmd(
             "(many thermal views fit them best), or a calibration file (its thermal section)."
         ),
     ] = None,
+    thermal_output: Annotated[
+        str,
+        typer.Option(
+            metavar="counts|kelvin:SCALE[:OFFSET]",
+            help="What the thermal camera's pixels are, written as thermal.output: raw counts "
+            "(counts:16 for 16 bits), or its own temperature, kelvin = value x SCALE + OFFSET "
+            "(a Boson in TLinear: kelvin:0.01; a Lepton's TLinear and a P2 Pro say it in "
+            "their frames).",
+        ),
+    ] = "counts",
 ) -> None:
     """Calibrate the depth + thermal pair from board captures: thermal (and depth)
     intrinsics and thermal_from_depth, with a quality report."""
@@ -118,6 +128,7 @@ def calibrate_cmd(
         drop_outliers,
         report_dir,
         thermal_intrinsics,
+        thermal_output,
     )
     outcome = calibrate(options, BARS)
     print_calibration_report(outcome.result)

@@ -12,9 +12,11 @@ from .base import (
     AmbientTempC,
     Board,
     BoardStyle,
+    DepthMode,
     HumidityPct,
     OutDir,
     Seed,
+    ThermalCamera,
     app,
     console,
     one_line_errors,
@@ -22,7 +24,7 @@ from .base import (
 )
 
 simulate_app = typer.Typer(
-    help="Simulate the D435 + Lepton 3 rig (sweeps, frames, targets).",
+    help="Simulate the rig: a D435 + a thermal camera (a Lepton 3 unless --thermal-camera).",
     no_args_is_help=True,
     rich_markup_mode=None,
 )
@@ -51,6 +53,7 @@ def simulate_sweep_cmd(
         bool, typer.Option("--by-vox", help="Average per 1 C of VOx (Tables 1-5).")
     ] = False,
     seed: Seed = 0,
+    thermal_camera: ThermalCamera = None,
 ) -> None:
     """The paper's protocol: plate-centre ROI readings vs distance and VOx temperature."""
     from ..app.simulate import sweep
@@ -65,6 +68,7 @@ def simulate_sweep_cmd(
         ambient_temp_c,
         humidity_pct,
         seed=seed,
+        thermal_camera=thermal_camera or "lepton3",
     )
     table = sweep(config, out, by_vox, BARS)
     console.print(f"wrote {len(table)} rows to {out}")
@@ -80,11 +84,13 @@ def simulate_frames_cmd(
     distance_m: Annotated[float, typer.Option(help="Rig distance to the plate, m.")] = 1.0,
     frames: Annotated[int, typer.Option(help="Number of frame pairs.")] = 5,
     seed: Seed = 0,
+    thermal_camera: ThermalCamera = None,
+    depth_mode: DepthMode = None,
 ) -> None:
     """Frame pairs with ground truth (npz per frame) and the rig's calibration."""
     from ..app.simulate import frames as write_frames
 
-    paths = write_frames(out, scene, distance_m, frames, seed, BARS)
+    paths = write_frames(out, scene, distance_m, frames, seed, BARS, thermal_camera, depth_mode)
     console.print(f"wrote {len(paths)} frames and calibration.yaml to {out}")
 
 
@@ -104,11 +110,15 @@ def simulate_targets_cmd(
             "RGB): ironbow, inferno, gray, ..."
         ),
     ] = "counts",
+    thermal_camera: ThermalCamera = None,
+    depth_mode: DepthMode = None,
 ) -> None:
     """Heated-board captures (IR + thermal per pose) for `thermodepth calibrate`."""
     from ..app.simulate import targets
 
-    caps = targets(out, board, square_m, poses, seed, BARS, style, thermal_format)
+    caps = targets(
+        out, board, square_m, poses, seed, BARS, style, thermal_format, thermal_camera, depth_mode
+    )
     console.print(f"wrote {len(caps.pairs)} pairs and {caps.calibration_path.name} to {out}")
 
 
@@ -123,12 +133,16 @@ def simulate_board_session_cmd(
     style: BoardStyle = "bare",
     hold_s: Annotated[float, typer.Option(help="Each pose held this long, s.")] = 0.7,
     move_s: Annotated[float, typer.Option(help="Moving to the next pose, s.")] = 0.35,
+    thermal_camera: ThermalCamera = None,
+    depth_mode: DepthMode = None,
 ) -> None:
     """A recording of a board shown to the rig (held, moved, held ...), with the IR image,
     for `thermodepth capture-board`."""
     from ..app.simulate import board_session
 
-    path = board_session(out, board, square_m, poses, seed, style, hold_s, move_s, BARS)
+    path = board_session(
+        out, board, square_m, poses, seed, style, hold_s, move_s, BARS, thermal_camera, depth_mode
+    )
     console.print(f"wrote {path}")
 
 
@@ -148,6 +162,8 @@ def simulate_protocol_cmd(
     ambient_temp_c: AmbientTempC = 25.0,
     humidity_pct: HumidityPct = 50.0,
     seed: Seed = 0,
+    thermal_camera: ThermalCamera = None,
+    depth_mode: DepthMode = None,
 ) -> None:
     """A recording of the paper's session: the plate at each distance while the camera warms
     up through its VOx range (FFC frames included), for `thermodepth collect-sweep`."""
@@ -165,6 +181,8 @@ def simulate_protocol_cmd(
         ambient_temp_c,
         humidity_pct,
         seed,
+        thermal_camera or "lepton3",
+        depth_mode or "1280x720",
     )
     path = protocol(out, config, BARS)
     console.print(f"wrote {path}: {config.pairs} pairs")

@@ -17,7 +17,8 @@ boson640     640x512    50 deg  60 Hz   TLinear, 0.01 K        FPA (serial chann
 
 Every camera shares the VOx physics of :mod:`.lepton` (the paper's effect: a residual gain and
 an interior emission that move with the sensor's temperature); the InfiRay's own firmware
-takes out more of it, so its residual effect is a third of the Lepton's. Depth modes
+takes out more of it (a stated choice: its residual effect is a third of the Lepton's), and
+it tells no sensor temperature, so no compensation can take out the rest. Depth modes
 (:data:`DEPTH_MODES`): the D435's 1280x720 (interpolated from its 1280x800 imagers), 848x480
 (Intel's recommended mode for the D435/D455) and 640x480, all at the same field of view but
 640x480's 4:3 crop.
@@ -88,7 +89,9 @@ THERMAL_CAMERAS: dict[str, ThermalCamera] = {
             fps=25.0,
             netd_k=0.040,
             supersample=3,
-            vox_gain_slope_per_k=0.003,
+            # a third of the Lepton's net VOx effect: its gain drifts 0.08 %/K where the
+            # Lepton's drifts 0.25 %/K (TCR -2/T + c), and a third of its interior emission
+            vox_gain_slope_per_k=0.0073,
             interior_emission=0.0033,
             ffc_interval_s=120.0,
             ffc_duration_s=0.4,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -17,12 +17,15 @@ from ..board import BoardSpec
 from ..calibration import Calibration
 from ..camera import RigidTransform
 from ..conditions import Conditions, Radiometry
+from ..errors import InputError
 from ..palettes import PALETTES, apply_palette
 from ..progress import Progress
 from ..radiometry import ZERO_C_IN_K
 from ..sweep import COLUMNS, SweepTable
+from .cameras import ThermalCamera, depth_mode, rig_calibration, thermal_camera
+from .d435 import DepthCameraModel
 from .lepton import FpaProfile, LeptonModel, LeptonSensor, ramp_fpa, steps_fpa
-from .rig import Rig, Trajectory, default_calibration
+from .rig import Rig, Trajectory
 from .scene import Scene, board_pattern, camera_pose, plate_scene, target_scene
 
 
@@ -36,7 +39,10 @@ class SweepConfig:
     of these temperatures in turn for an equal share of the samples; samples: readings per
     distance and
     plate temperature (the paper takes 6000); roi_half_px: ROI of (2 h + 1)^2 thermal pixels
-    at the plate centre; emissivity: used by the radiometry of measured_temp_c.
+    at the plate centre; emissivity: used by the radiometry of measured_temp_c;
+    thermal_camera: the simulated camera (:data:`~.cameras.THERMAL_CAMERAS`; its readings are
+    its own kind, counts or kelvin; one that tells no VOx temperature leaves vox_temp_c
+    empty).
     """
 
     distances_m: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5)
@@ -50,6 +56,7 @@ class SweepConfig:
     roi_half_px: int = 2
     seed: int = 0
     vox_steps_c: tuple[float, ...] | None = None
+    thermal_camera: str = "lepton3"
 
     def fpa_profile(self, fps: float) -> FpaProfile:
         """FPA temperature (K) over the ``samples`` frames of one distance."""
@@ -61,6 +68,12 @@ class SweepConfig:
                 [i * duration_s / n for i in range(n)], [t + k for t in self.vox_steps_c]
             )
         return ramp_fpa(self.vox_min_c + k, self.vox_max_c + k, duration_s)
+
+
+def scaled_supersample(supersample: int, camera: ThermalCamera) -> int:
+    """Rays per pixel side that keep about as many rays per image as ``supersample`` gives a
+    160-wide camera (a 640-wide camera's pixels need fewer, an 80-wide one's more)."""
+    return max(2, round(supersample * 160 / camera.width))
 
 
 def plate_roi(rig: Rig, half: int) -> tuple[slice, slice]:
@@ -83,10 +96,11 @@ def simulate_sweep(
     counts with the plate's emissivity, without distance correction.
     """
     config = config or SweepConfig()
-    lepton = lepton or LeptonModel()
+    lepton = lepton or thermal_camera(config.thermal_camera).sensor
     radiometry = Radiometry(
         Conditions(config.emissivity, config.ambient_temp_c, humidity_pct=config.humidity_pct),
         lepton.planck,
+        output=lepton.output,
     )
     blocks: list[dict[str, NDArray[np.float64]]] = []  # one per plate temperature and distance
     rng = np.random.default_rng(config.seed)
@@ -97,7 +111,7 @@ def simulate_sweep(
             relative_humidity=config.humidity_pct / 100.0,
         )
         for d in config.distances_m:
-            rig = Rig(scene, camera_pose(d), lepton=lepton)
+            rig = Rig.of_cameras(scene, camera_pose(d), config.thermal_camera, lepton=lepton)
             roi = rig.aperture[plate_roi(rig, config.roi_half_px)]
             sensor = LeptonSensor(lepton, roi.shape, config.fpa_profile(lepton.fps), rng)
             counts, vox = [], []
@@ -157,7 +171,7 @@ def random_board_poses(
     rng: np.random.Generator,
     distance_m: tuple[float, float] = (0.4, 0.65),
     tilt_deg: tuple[float, float] = (15.0, 45.0),
-    margin_px: float = 4.0,
+    margin_px: float | None = None,
     edge_bias: float = 0.35,
 ) -> list[RigidTransform]:
     """``n`` poses ``depth_from_board`` of a board seen whole by both cameras, spread over the
@@ -170,7 +184,8 @@ def random_board_poses(
     drawn from ``tilt_deg`` in a random direction (tilt is what determines focal length and
     principal point; past ~50 degrees a 160x120 view of a 3 cm board is not detected) and
     rolled by up to 10 degrees. A pose is kept when the whole board (squares plus 7.5 %)
-    projects inside both images by ``margin_px``.
+    projects inside both images by ``margin_px`` (None: 4 pixels of a 160-wide thermal image,
+    scaled to its own). A board that fits in no pose is an InputError.
     """
     pattern = board_pattern(board)
     w, h = pattern.size_m
@@ -179,6 +194,7 @@ def random_board_poses(
         * 1.15
     )
     thermal = calibration.thermal
+    margin = 4.0 * thermal.width / 160 if margin_px is None else margin_px
     depth_from_thermal = calibration.thermal_from_depth.inverse()
     poses: list[RigidTransform] = []
     batch = 512  # candidates drawn and tested at once (most fall partly outside a view)
@@ -208,17 +224,20 @@ def random_board_poses(
         ):
             q = intr.project(pts)
             inside = (
-                (q[..., 0] >= margin_px)
-                & (q[..., 0] <= intr.width - 1 - margin_px)
-                & (q[..., 1] >= margin_px)
-                & (q[..., 1] <= intr.height - 1 - margin_px)
+                (q[..., 0] >= margin)
+                & (q[..., 0] <= intr.width - 1 - margin)
+                & (q[..., 1] >= margin)
+                & (q[..., 1] <= intr.height - 1 - margin)
             )
             ok &= np.all(inside, axis=1)
         for i in np.flatnonzero(ok)[: n - len(poses)]:
             poses.append(RigidTransform(rot[i], centre[i], "depth", "board"))
         if len(poses) == n:
             return poses
-    raise RuntimeError("could not place the board in both views; is it too large?")
+    raise InputError(
+        f"{board}: the board does not fit whole in both views at {distance_m[0]:g}-"
+        f"{distance_m[1]:g} m; choose a smaller one (--board, --square-m)"
+    )
 
 
 def _rot_x(angle: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -256,6 +275,8 @@ def simulate_targets(
     style: str = "bare",
     margin_m: float | None = None,
     thermal_format: str = "counts",
+    camera: str | None = None,
+    depth: str | None = None,
 ) -> TargetCaptures:
     """Heated-board captures for ``thermodepth calibrate``: ``poseNN_ir.png`` (8-bit IR of
     the depth camera) and ``poseNN_thermal.png`` per pose, plus ``truth_calibration.yaml``
@@ -264,17 +285,21 @@ def simulate_targets(
     style: how the board is made (:data:`~thermodepth.sim.scene.BOARD_STYLES`), with a
     margin ``margin_m`` wide (None: the style's); thermal_format: ``counts`` (16-bit PNG of
     the raw counts) or a palette of :data:`~thermodepth.palettes.PALETTES` (8-bit RGB, as
-    viewer tools save frames: :func:`~thermodepth.palettes.apply_palette`)."""
+    viewer tools save frames: :func:`~thermodepth.palettes.apply_palette`); camera, depth: the
+    simulated thermal camera and depth mode (None: the Lepton 3, 1280x720), whose supersampling
+    is scaled to keep about as many rays per image as a 160-wide camera's
+    ``thermal_supersample``."""
     if thermal_format != "counts" and thermal_format not in PALETTES:
         raise ValueError(
             f"unknown thermal format {thermal_format!r}; choose counts or one of {PALETTES}"
         )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    cal = default_calibration()
+    cam = thermal_camera(camera)
+    cal = rig_calibration(cam, depth_mode(depth))
     rng = np.random.default_rng(seed)
     poses = random_board_poses(board, n_poses, cal, rng)
-    lepton = LeptonModel(supersample=thermal_supersample)
+    lepton = replace(cam.sensor, supersample=scaled_supersample(thermal_supersample, cam))
     identity = RigidTransform.identity("world", "depth")
     pairs = []
     for i, pose in enumerate(poses):
@@ -287,6 +312,7 @@ def simulate_targets(
             identity,
             calibration=cal,
             lepton=lepton,
+            depth_model=DepthCameraModel(fps=depth_mode(depth).fps),
             with_ir=True,
             seed=seed * 1000 + i,
             start_s=1.0,
@@ -360,6 +386,8 @@ def simulate_board_session(
     ffc_interval_s: float = 180.0,
     board_temp_c: float = 45.0,
     progress: Progress | None = None,
+    camera: str | None = None,
+    depth: str | None = None,
 ) -> Path:
     """A recording of someone showing a board to the rig: ``n_poses`` poses spread as
     :func:`random_board_poses` spreads them, each held ``hold_s`` then moved to the next over
@@ -367,8 +395,10 @@ def simulate_board_session(
     pairs taken while the board moves show it in two places. Only the depth frames that pair
     with a thermal frame are recorded (the ones ``capture-board`` reads). The recording's
     calibration is the rig's truth. ``ffc_interval_s``: the Lepton's timed shutter (FFC
-    frames are recorded, marked as such)."""
-    cal = default_calibration()
+    frames are recorded, marked as such); camera, depth: the simulated cameras (None: the
+    Lepton 3, 1280x720)."""
+    cam = thermal_camera(camera)
+    cal = rig_calibration(cam, depth_mode(depth))
     rng = np.random.default_rng(seed)
     held = [p.inverse() for p in random_board_poses(board, n_poses, cal, rng)]  # board frame
     world = [RigidTransform(p.rotation, p.translation_m, "world", "depth") for p in held]
@@ -377,14 +407,23 @@ def simulate_board_session(
         target_scene(board_pattern(board), board_temp_c, style=style),
         world[0],
         calibration=cal,
-        lepton=LeptonModel(supersample=8, ffc_interval_s=ffc_interval_s),
+        lepton=replace(
+            cam.sensor, supersample=scaled_supersample(8, cam), ffc_interval_s=ffc_interval_s
+        ),
+        depth_model=DepthCameraModel(fps=depth_mode(depth).fps),
         seed=seed,
         with_ir=True,
         start_s=1.0,
         trajectory=trajectory,
     )
     n_frames = session_frames(n_poses, hold_s, move_s, rig.lepton.fps)
-    settings = {"source": "sim:board-session", "board": str(board), "style": style}
+    settings = {
+        "source": "sim:board-session",
+        "board": str(board),
+        "style": style,
+        "thermal_camera": cam.name,
+        "depth_mode": depth_mode(depth).name,
+    }
     return _record(out, rig, n_frames, settings, progress)
 
 
@@ -400,7 +439,8 @@ class ProtocolConfig:
     at 8.7 fps; a protocol keeps one pair every so often, so the warm-up takes minutes, as a
     real one does, and the Lepton's FFCs come as often as on a real camera); move_s: time the
     plate takes to reach the next distance (pairs are recorded while it moves);
-    ambient_temp_c, humidity_pct: the room; seed: all randomness.
+    ambient_temp_c, humidity_pct: the room; seed: all randomness; thermal_camera,
+    depth_mode: the simulated cameras (:mod:`.cameras`).
     """
 
     distances_m: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5)
@@ -413,6 +453,8 @@ class ProtocolConfig:
     ambient_temp_c: float = 25.0
     humidity_pct: float = 50.0
     seed: int = 0
+    thermal_camera: str = "lepton3"
+    depth_mode: str = "1280x720"
 
     @property
     def hold_s(self) -> float:
@@ -453,16 +495,16 @@ def simulate_protocol(
     from dataclasses import asdict
 
     config = config or ProtocolConfig()
-    cal = default_calibration()
     poses = [camera_pose(d) for d in config.distances_m]
-    rig = Rig(
+    rig = Rig.of_cameras(
         plate_scene(
             plate_temp_c=config.plate_temp_c,
             ambient_temp_c=config.ambient_temp_c,
             relative_humidity=config.humidity_pct / 100.0,
         ),
         poses[0],
-        calibration=cal,
+        config.thermal_camera,
+        config.depth_mode,
         fpa=config.fpa_k,
         seed=config.seed,
         start_s=config.start_s,
@@ -503,14 +545,17 @@ def write_frames(
     n_frames: int,
     seed: int = 0,
     progress: Progress | None = None,
+    camera: str | None = None,
+    depth: str | None = None,
 ) -> list[Path]:
-    """Write ``n_frames`` frame pairs with ground truth: ``calibration.yaml``, then per frame
+    """Write ``n_frames`` frame pairs of the simulated cameras ``camera`` and ``depth`` (None:
+    the Lepton 3, 1280x720) with ground truth: ``calibration.yaml``, then per frame
     ``frame_NNNNNN.npz`` holding depth (uint16), thermal (uint16), times, telemetry (JSON) and
     the truth on both grids (float32; depth_z_m, depth_temp_k, thermal_pixel_of_depth,
     visible_in_thermal, thermal_temp_k, thermal_range_m)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rig = Rig(scene, camera_pose(distance_m), seed=seed, start_s=1.0)
+    rig = Rig.of_cameras(scene, camera_pose(distance_m), camera, depth, seed=seed, start_s=1.0)
     rig.calibration.save(out / "calibration.yaml")
     truth = rig.truth()  # one pose: the same truth in every frame, converted once
     truth_f32: dict[str, Any] = {
