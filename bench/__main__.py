@@ -10,6 +10,7 @@ BENCHMARKS = [
     "bench_registration",
     "bench_compensation",
     "bench_pipeline",
+    "bench_cameras",
     "bench_recording",
     "bench_replay",
     "bench_codecs",

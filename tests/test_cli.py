@@ -89,7 +89,7 @@ def test_a_frame_line_names_the_flags_of_its_readings(capsys: pytest.CaptureFixt
     )  # fmt: skip
     rois = [SimpleNamespace(name="[pump]", n=10, mean_c=50.0, flags=0)]
     frame = SimpleNamespace(
-        in_ffc=False, index=3, thermal_time_s=0.34, vox_temp_c=-273.15, hotspots=[spot],
+        in_ffc=False, index=3, thermal_time_s=0.34, vox_label="-273.15 C", hotspots=[spot],
         rois=rois, events=[{"event": "alarm", "rule": "[hot]", "value_c": 201.9, "above_c": 60,
                             "for_frames": 1}],
     )  # fmt: skip

@@ -130,3 +130,34 @@ def test_a_folder_without_its_files(tmp_path: Path) -> None:
     (folder / "frames.csv").write_text("depth,image\nd.png,t.png\n")
     with pytest.raises(InputError, match=r"frames.csv: missing column thermal"):
         open_source(f"folder:{folder}")
+
+
+def test_a_folder_works_wherever_a_source_does(tmp_path: Path) -> None:
+    # capture-board finds the board in the folder's infrared images; view and snapshots draw
+    # a P2 Pro's 256x192 on a D435's 848x480
+    from thermodepth.app.capture import CaptureOptions, capture_board
+    from thermodepth.board import BoardSpec
+    from thermodepth.sim.protocols import simulate_board_session
+
+    board = BoardSpec.parse("checkerboard:9x6", 0.03)
+    session = simulate_board_session(
+        tmp_path / "board.zarr", board, 3, seed=2, camera="p2pro", depth="848x480"
+    )
+    replay = open_source(f"recording:{session}")
+    folder = write_folder(tmp_path / "boards", replay.calibration, replay)  # type: ignore[arg-type]
+    assert (folder / "ir").is_dir()
+    result = capture_board(CaptureOptions(f"folder:{folder}", tmp_path / "pairs", 0.03))
+    assert len(result.kept) >= 2
+    pytest.importorskip("rerun", reason="the viewer needs the viewer extra (rerun-sdk)")
+    settings = tmp_path / "s.yaml"
+    settings.write_text("viewer: {temp_range_c: [20, 80]}\n")
+    rig = sim_folder(tmp_path, n=14)
+    out = tmp_path / "out"
+    got = run(
+        RunOptions(
+            f"folder:{rig}", settings, out_dir=out, snapshots=10, viewer_save=tmp_path / "v.rrd"
+        )
+    )
+    assert got.frames == 14 and (tmp_path / "v.rrd").stat().st_size > 0
+    png = out / "snapshots" / "frame_000010.png"
+    assert png.exists() and png.with_suffix(".ply").exists()

@@ -185,7 +185,7 @@ def plot_overlay(
     handles = [Patch(facecolor=(*rgb, 0.55), label=text) for _, text, rgb in NO_TEMPERATURE]
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.01), ncol=3,
               fontsize=8, frameon=False, title="no temperature:", title_fontsize=8)  # fmt: skip
-    ax.set_title(title or f"frame {frame.index}: VOx {frame.vox_temp_c:.2f} C", fontsize=10)
+    ax.set_title(title or f"frame {frame.index}: VOx {frame.vox_label}", fontsize=10)
     ax.set_axis_off()
     return save_figure(fig, path)
 

@@ -331,6 +331,12 @@ class FusedFrame:
         """Why a depth pixel has no temperature (:class:`~thermodepth.registration.Reason`)."""
         return self.on_depth.reason
 
+    @property
+    def vox_label(self) -> str:
+        """The VOx temperature as a line shows it: ``35.00 C``, or ``not told`` (NaN: the
+        camera tells none)."""
+        return "not told" if np.isnan(self.vox_temp_c) else f"{self.vox_temp_c:.2f} C"
+
     @cached_property
     def depth_m(self) -> FloatArray:
         """Depth Z in metres (H, W), NaN where invalid."""

@@ -127,6 +127,14 @@ def open_choice(
     return src
 
 
+def spec_of(text: str) -> str:
+    """A source spec as it is (``folder:PATH``, ``sim``, ``realsense+lepton``, ...), or a
+    path taken as a recording (``recording:PATH``)."""
+    kind, arg = sources.split_spec(text)[0]
+    named = kind in sources.SOURCE_KINDS and (arg or kind == "sim" or "+" in text)
+    return text if named else f"recording:{text}"
+
+
 def never_ends(spec: str) -> bool:
     """True for a source that gives pairs for ever (the simulator), which a session must be
     told when to stop."""

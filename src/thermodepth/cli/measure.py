@@ -241,19 +241,25 @@ def run_cmd(
 @app.command("view")
 @one_line_errors
 def view_cmd(
-    recording: Annotated[Path, typer.Argument(help="A recording (.zarr) to replay.")],
+    recording: Annotated[
+        str,
+        typer.Argument(
+            metavar="RECORDING|SOURCE",
+            help="A recording (.zarr) to replay, or any source spec (folder:PATH, sim, ...).",
+        ),
+    ],
     settings: Annotated[
         Path | None, typer.Option(help="Settings YAML (calibration, compensation, rules).")
     ] = None,
     save: ViewerSave = None,
     connect: ViewerConnect = None,
 ) -> None:
-    """Replay a recording through the pipeline into the rerun viewer (spawned, unless it is
-    saved to a file or sent to a running viewer)."""
-    from ..app.run import RunOptions, run
+    """Replay a recording (or any source) through the pipeline into the rerun viewer (spawned,
+    unless it is saved to a file or sent to a running viewer)."""
+    from ..app.run import RunOptions, run, spec_of
 
     options = RunOptions(
-        f"recording:{recording}",
+        spec_of(recording),
         settings,
         viewer=save is None and connect is None,
         viewer_save=save,
@@ -283,8 +289,7 @@ def print_frame(fused: FusedFrame) -> None:
             "closed (FFC): not measured[/dim]"
         )
         return
-    vox = "  -  " if fused.vox_temp_c != fused.vox_temp_c else f"{fused.vox_temp_c:5.2f}"
-    parts = [f"frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  VOx {vox} C"]
+    parts = [f"frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  VOx {fused.vox_label}"]
     if fused.hotspots:
         h = fused.hotspots[0]
         parts.append(

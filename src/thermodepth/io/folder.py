@@ -4,12 +4,13 @@ Layout (``thermodepth run --source folder:PATH`` reads it; :func:`write_folder` 
 
     PATH/rig.yaml      a calibration file; its thermal.output says what the thermal values are
     PATH/frames.csv    one row per pair: depth, thermal (file paths relative to PATH) and,
-                       optionally, depth_time_s, thermal_time_s, fpa_temp_c, in_ffc
+                       optionally, depth_time_s, thermal_time_s, fpa_temp_c, in_ffc, ir
 
 Depth images: 16-bit PNG or TIFF, or ``.npy``, in the calibration's ``depth_scale_m`` units
 (0 = no depth). Thermal images: 16-bit PNG or TIFF, or ``.npy``, of uint16 values of the kind
 rig.yaml states, or float kelvin (``.npy``, 32-bit float TIFF), which are stored as the
-camera's own temperature at 1/64 K. ``in_ffc``: 1 / true while the shutter is closed.
+camera's own temperature at 1/64 K. ``in_ffc``: 1 / true while the shutter is closed. ``ir``:
+the depth camera's 8-bit infrared image (what ``capture-board`` finds the board in).
 
 A row that cannot be read (a missing file, an image that is not one, a value that is not a
 number) is one line naming the row and the file (:class:`RowError`); an image whose size
@@ -37,7 +38,7 @@ from ..radiometry import ZERO_C_IN_K, ThermalOutput
 RIG_FILE = "rig.yaml"
 FRAMES_FILE = "frames.csv"
 REQUIRED = ("depth", "thermal")
-OPTIONAL = ("depth_time_s", "thermal_time_s", "fpa_temp_c", "in_ffc")
+OPTIONAL = ("depth_time_s", "thermal_time_s", "fpa_temp_c", "in_ffc", "ir")
 FLOAT_KELVIN = ThermalOutput.kelvin_per(1 / 64)
 """How float kelvin thermal images are held: the camera's own temperature at 1/64 K (up to
 1024 K, 751 C)."""
@@ -59,6 +60,7 @@ class Row:
     thermal_time_s: float | None
     fpa_temp_c: float | None
     in_ffc: bool
+    ir: Path | None = None
 
 
 def read_rows(folder: Path) -> list[Row]:
@@ -101,6 +103,7 @@ def _row(folder: Path, line: int, cells: dict[str, str]) -> Row:
         number("thermal_time_s"),
         number("fpa_temp_c"),
         ffc in ("1", "true", "yes"),
+        folder / cells["ir"] if cells.get("ir") else None,
     )
 
 
@@ -110,10 +113,11 @@ def check_row(row: Row, where: str) -> None:
         value = getattr(row, name)
         if value is not None and not math.isfinite(value):
             raise RowError(f"{where}: line {row.line}: {name} is not a number")
-    for name in REQUIRED:
-        if getattr(row, name).suffix.lower() not in IMAGE_SUFFIXES:
+    for name in (*REQUIRED, "ir"):
+        path = getattr(row, name)
+        if path is not None and path.suffix.lower() not in IMAGE_SUFFIXES:
             raise RowError(
-                f"{where}: line {row.line}: {name} {getattr(row, name).name}: expected a "
+                f"{where}: line {row.line}: {name} {path.name}: expected a "
                 f"{', '.join(IMAGE_SUFFIXES)} file"
             )
 
@@ -145,6 +149,15 @@ def depth_image(path: Path, where: str, shape: tuple[int, int]) -> NDArray[np.ui
         raise RowError(f"{where}: {path}: depth must be 16-bit (uint16), got {image.dtype}")
     _check_size(image, shape, path, "depth")
     return image.astype(np.uint16, copy=False)
+
+
+def ir_image(path: Path, where: str, shape: tuple[int, int]) -> NDArray[np.uint8]:
+    """An infrared image of the depth camera (8-bit, its size)."""
+    image = read_image(path, where)
+    if image.dtype != np.uint8:
+        raise RowError(f"{where}: {path}: the infrared image must be 8-bit, got {image.dtype}")
+    _check_size(image, shape, path, "depth")
+    return image.astype(np.uint8, copy=False)
 
 
 def thermal_image(
@@ -203,6 +216,9 @@ def write_folder(out: str | Path, calibration: Calibration, pairs: Iterable[Fram
             name = f"{pair.index:06d}.png"
             cv2.imwrite(str(folder / "depth" / name), pair.depth)
             cv2.imwrite(str(folder / "thermal" / name), pair.thermal)
+            if pair.ir is not None:
+                (folder / "ir").mkdir(exist_ok=True)
+                cv2.imwrite(str(folder / "ir" / name), pair.ir)
             output = thermal_output(pair.telemetry, calibration.thermal_output)
             fpa = pair.telemetry.fpa_temp_c
             w.writerow(
@@ -213,6 +229,7 @@ def write_folder(out: str | Path, calibration: Calibration, pairs: Iterable[Fram
                     repr(pair.thermal_time_s),
                     "" if math.isnan(fpa) else repr(fpa),
                     int(pair.telemetry.in_ffc),
+                    "" if pair.ir is None else f"ir/{name}",
                 ]
             )
     rig = Calibration(

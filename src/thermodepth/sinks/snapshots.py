@@ -37,7 +37,7 @@ class SnapshotSink(BaseSink):
         lo, hi = self.range_c
         stem = self.folder / f"frame_{fused.index:06d}"
         rule = ", ".join(alarms)
-        title = f"frame {fused.index}, t {fused.thermal_time_s:.2f} s, VOx {fused.vox_temp_c:.2f} C"
+        title = f"frame {fused.index}, t {fused.thermal_time_s:.2f} s, VOx {fused.vox_label}"
         plot_overlay(
             fused, stem.with_suffix(".png"), title + (f": ALARM {rule}" if rule else ""), lo, hi
         )

@@ -27,6 +27,7 @@ from ..io.folder import (
     RowError,
     check_row,
     depth_image,
+    ir_image,
     read_rows,
     telemetry_of,
     thermal_image,
@@ -74,6 +75,7 @@ class FolderSource(Source):
         try:
             check_row(row, str(self.folder / FRAMES_FILE))
             depth = depth_image(row.depth, where, cal.depth.shape)
+            ir = None if row.ir is None else ir_image(row.ir, where, cal.depth.shape)
             values, float_kelvin = thermal_image(row.thermal, where, cal.thermal.shape)
         except RowError as exc:
             self.bad_rows += 1
@@ -82,7 +84,8 @@ class FolderSource(Source):
         t_depth = float(index) if row.depth_time_s is None else row.depth_time_s
         t_thermal = float(index) if row.thermal_time_s is None else row.thermal_time_s
         telemetry = telemetry_of(row, index, float_kelvin)
-        return DepthFrame(depth, t_depth, index), ThermalFrame(values, t_thermal, index, telemetry)
+        thermal = ThermalFrame(values, t_thermal, index, telemetry)
+        return DepthFrame(depth, t_depth, index, ir), thermal
 
     def events(self) -> Iterator[StreamEvent]:
         if self.pairer is None:  # row by row
