@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from scipy.integrate import quad
 
 from thermodepth.conditions import Conditions, Radiometry
+from thermodepth.frame_radiometry import frame_celsius
 from thermodepth.radiometry import (
     PAPER_2022,
     STEFAN_BOLTZMANN,
@@ -357,3 +358,45 @@ def test_a_frame_of_another_kind_is_told() -> None:
     assert why is not None and "beyond the 14-bit range" in why
     tlinear[:50] = 0  # fewer than half of the pixels bad: NaN per pixel, no line
     assert LEPTON_TLINEAR.problem(tlinear) is None
+
+
+# --- A whole frame in one pass (frame_radiometry) equals the numpy path -----------------------
+
+
+@pytest.mark.parametrize("output", [ThermalOutput(), LEPTON_TLINEAR, P2PRO])
+@pytest.mark.parametrize(("gain", "offset"), [(1.0, 0.0), (0.97, 35.0)])
+def test_a_frame_in_one_pass_is_the_numpy_path(
+    output: ThermalOutput, gain: float, offset: float
+) -> None:
+    rng = np.random.default_rng(4)
+    lo, hi = (7000, 13000) if not output.is_kelvin else (26000, 45000)
+    if output == P2PRO:
+        lo, hi = 17000, 30000
+    values = rng.integers(lo, hi, (48, 64)).astype(np.uint16)
+    values[0, :5] = [0, 65535, 16384, 1, 6000]  # no data, beyond 14 bits, ...
+    d = rng.uniform(0.2, 6.0, (48, 64)).astype(np.float32)
+    d[1, :3] = [np.nan, 2000.0, 0.0]  # no distance, beyond the table, at the lens
+    cond = Conditions(emissivity=0.9, ambient_temp_c=22.0, reflected_temp_c=30.0, humidity_pct=60.0)
+    rad = Radiometry(cond, output=output)
+    limits = (0.5, 4.0, 20.0, 60.0)
+    fast = frame_celsius(values, d, rad.params(), output, gain, offset, limits, (1, 4, 8, 2))
+    assert fast is not None
+    temp, flags = fast
+    signal = rad.signal(values)
+    corrected = PAPER_2022.O + (signal - PAPER_2022.O - offset) / gain
+    want = rad.with_output(ThermalOutput(bits=32)).celsius(corrected, d)  # the numpy path
+    assert np.array_equal(np.isnan(temp), np.isnan(want))
+    # float64 both, the sums reordered: 1e-6 C, or 2e-9 of the value at hundreds of C
+    assert np.allclose(temp, want, rtol=2e-9, atol=1e-6, equal_nan=True)
+    expected = (
+        2
+        | np.where((d < 0.5) | (d > 4.0), 1, 0)
+        | np.where((want < 20.0) | (want > 60.0), 4, 0)
+        | np.where(np.isnan(want), 8, 0)
+    )
+    assert np.array_equal(flags, expected)
+    # a condition that is a map, another model or not a uint16 frame: the numpy path's
+    emissivity_map = Radiometry(cond.replace(emissivity=np.full((48, 64), 0.9)), output=output)
+    assert emissivity_map.frame(values, d) is None
+    assert Radiometry(cond, method="thermimage", output=output).frame(values, d) is None
+    assert rad.frame(values.astype(np.float64), d) is None

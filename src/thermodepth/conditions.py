@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import AfterValidator
 
 from .errors import FieldError
+from .frame_radiometry import frame_celsius
 from .radiometry import (
     MAX_DISTANCE_M,
     PAPER_2022,
@@ -200,6 +201,33 @@ class Radiometry:
         """Values no temperature can come from (NaN; counts outside the ADC's range; a kelvin
         reading that is no temperature)."""
         return self.output.invalid(values)
+
+    def frame(
+        self,
+        values: ArrayLike,
+        distance_m: ArrayLike,
+        gain: float = 1.0,
+        offset: float = 0.0,
+        limits: tuple[float, float, float, float] = (-np.inf, np.inf, -np.inf, np.inf),
+        flag_bits: tuple[int, int, int, int] = (0, 0, 0, 0),
+    ) -> tuple[FloatArray, NDArray[np.uint8]] | None:
+        """Temperature (C) and flags of a whole uint16 frame at per-pixel distances in one
+        pass (:func:`~thermodepth.frame_radiometry.frame_celsius`: the sensor's ``gain`` and
+        ``offset`` taken out, pixels beyond ``limits`` flagged with ``flag_bits``), or None
+        when it does not apply (another method, a condition map, values not a uint16 frame):
+        the caller then takes the numpy path, which gives the same temperatures."""
+        if self.method != "flir":
+            return None
+        return frame_celsius(
+            np.asarray(values),
+            np.asarray(distance_m),
+            self.params(),
+            self.output,
+            gain,
+            offset,
+            limits,
+            flag_bits,
+        )
 
     def with_output(self, output: ThermalOutput) -> Radiometry:
         """The same radiometry for pixel values of another kind."""

@@ -478,15 +478,15 @@ class Pipeline:
         NaN and flagged ``BAD_COUNTS``. A NaN ``vox_c`` (no sensor temperature) is
         compensated at the model's reference VOx temperature and flagged ``NO_VOX``."""
         radiometry = radiometry or self.radiometry
-        c = np.asarray(values, dtype=np.float64)
         extra = np.uint8(0)
         reference = self.model.vox_reference_c
         if not np.isfinite(vox_c) and reference is not None:
             vox_c, extra = reference, np.uint8(PixelFlag.NO_VOX)
-        temp, flags = self.model.from_counts(c, vox_c, distance_m, radiometry)
-        bad = radiometry.invalid(c)
+        temp, flags = self.model.from_counts(values, vox_c, distance_m, radiometry)
+        bad = radiometry.invalid(values)
         flags = flags | extra | np.where(bad, np.uint8(PixelFlag.BAD_COUNTS), np.uint8(0))
-        return np.where(bad, np.nan, temp).astype(np.float32), flags.astype(np.uint8)
+        out = np.where(bad, np.float32(np.nan), temp.astype(np.float32, copy=False))
+        return out.astype(np.float32, copy=False), flags.astype(np.uint8, copy=False)
 
     def process(self, pair: FramePair) -> FusedFrame:
         """Fuse one frame pair (steps in the module docstring)."""

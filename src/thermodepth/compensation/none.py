@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike
 from ..conditions import Conditions, ConditionsSchema, Radiometry
 from ..radiometry import PAPER_2022, PlanckConstants
 from ..schema import PlanckSchema, StrictSchema
-from .base import Compensated, FloatArray, invalid_flag
+from .base import Compensated, Flag, FloatArray, invalid_flag
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,10 @@ class NoCompensation:
     def from_counts(
         self, counts: ArrayLike, vox_c: ArrayLike, distance_m: ArrayLike, radiometry: Radiometry
     ) -> Compensated:
+        """The radiometry at ``distance_m`` (a whole frame in one pass where it applies)."""
+        fast = radiometry.frame(counts, distance_m, flag_bits=(0, 0, Flag.INVALID, 0))
+        if fast is not None:
+            return Compensated(*fast)
         temp = radiometry.celsius(counts, distance_m)
         return Compensated(temp, invalid_flag(temp))
 

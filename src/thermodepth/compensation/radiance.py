@@ -166,7 +166,25 @@ class RadianceModel:
         self, counts: ArrayLike, vox_c: ArrayLike, distance_m: ArrayLike, radiometry: Radiometry
     ) -> Compensated:
         """The values' signal (raw counts as they are, a kelvin output through the model's
-        Planck constants), then :meth:`apply_counts`."""
+        Planck constants), then :meth:`apply_counts`; a whole frame at one VOx temperature
+        in one pass (:meth:`~thermodepth.conditions.Radiometry.frame`, the same result)."""
+        if np.ndim(vox_c) == 0:
+            g, h = self.gain_offset(vox_c)
+            (d0, d1), (lo, hi) = self.distance_range_m, self.temp_range_c
+            margin = max(10.0, 0.5 * (hi - lo))
+            vox_flag = 0
+            if self.vox_range_c is not None:
+                vox_flag = int(range_flag(vox_c, *self.vox_range_c, 3.0, Flag.VOX_OUTSIDE))
+            fast = radiometry.frame(
+                counts,
+                distance_m,
+                float(g),
+                float(h),
+                (d0 - 0.25, d1 + 0.25, lo - margin, hi + margin),
+                (Flag.DISTANCE_OUTSIDE, Flag.TEMPERATURE_OUTSIDE, Flag.INVALID, vox_flag),
+            )
+            if fast is not None:
+                return Compensated(*fast)
         return self.apply_counts(
             radiometry.signal(counts), vox_c, distance_m, radiometry.conditions
         )
