@@ -25,6 +25,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -142,22 +143,18 @@ def read_image(path: Path, where: str) -> NDArray[np.generic]:
     return image
 
 
-def depth_image(path: Path, where: str, shape: tuple[int, int]) -> NDArray[np.uint16]:
-    """A depth image (uint16 in depth units)."""
+def depth_image(
+    path: Path, where: str, shape: tuple[int, int], dtype: type[np.generic] = np.uint16
+) -> NDArray[Any]:
+    """A depth camera's image: its depth (uint16, in depth units) or, with ``dtype`` uint8,
+    its infrared image; RowError for another dtype, InputError for another size."""
     image = read_image(path, where)
-    if image.dtype != np.uint16:
-        raise RowError(f"{where}: {path}: depth must be 16-bit (uint16), got {image.dtype}")
+    if image.dtype != dtype:
+        what = "depth" if dtype == np.uint16 else "the infrared image"
+        bits = 8 * np.dtype(dtype).itemsize
+        raise RowError(f"{where}: {path}: {what} must be {bits}-bit, got {image.dtype}")
     _check_size(image, shape, path, "depth")
-    return image.astype(np.uint16, copy=False)
-
-
-def ir_image(path: Path, where: str, shape: tuple[int, int]) -> NDArray[np.uint8]:
-    """An infrared image of the depth camera (8-bit, its size)."""
-    image = read_image(path, where)
-    if image.dtype != np.uint8:
-        raise RowError(f"{where}: {path}: the infrared image must be 8-bit, got {image.dtype}")
-    _check_size(image, shape, path, "depth")
-    return image.astype(np.uint8, copy=False)
+    return image
 
 
 def thermal_image(

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from ..errors import InputError
 from ..frames import FfcState, Telemetry, ThermalFrame
 from ..radiometry import ZERO_C_IN_K, ThermalOutput
-from .uvc import SYSFS_VIDEO, UvcCapture, device_index, frozen, rebuild
+from .uvc import SYSFS_VIDEO, UvcCamera, frozen, opened_channel, rebuild
 
 IMAGE_SHAPES = ((512, 640), (256, 320))
 """The Boson's images, rows x columns: the 640 and the 320."""
@@ -145,7 +145,7 @@ def open_command_channel(port: str | None = None) -> CommandChannel | str:
     return channel
 
 
-class BosonCamera:
+class BosonCamera(UvcCamera):
     """Thermal frames from a FLIR Boson (module docstring).
 
     index: the /dev/videoN number (default: the first found by USB id); output: what its
@@ -154,6 +154,8 @@ class BosonCamera:
     one line about an unopened command channel goes; channel: how to open it
     (:func:`open_command_channel`); fpa_every_s: how often the FPA temperature is read.
     """
+
+    kind = "boson"
 
     def __init__(
         self,
@@ -166,21 +168,17 @@ class BosonCamera:
         channel: Callable[[], CommandChannel | str] = open_command_channel,
         fpa_every_s: float = 1.0,
     ) -> None:
-        if index is None:
-            index = device_index("boson", "", sysfs)
-        self.name = f"boson:{index}"
-        self.live = True
+        super().__init__(index, "Y16 ", None, timeout_s, latency_s, warn, sysfs)
         self.output = output or ThermalOutput(bits=16)
-        self.capture = UvcCapture(index, self.name, "Y16 ", None, timeout_s, latency_s)
         self.fpa_every_s = fpa_every_s
-        opened = channel()
-        self.channel = opened if isinstance(opened, CommandChannel) else None
-        if self.channel is None:
-            (warn or (lambda line: None))(
-                f"{self.name}: its command channel cannot be opened ({opened}): the FPA (VOx) "
-                "temperature is unknown (compensated at the model's reference VOx, flagged "
-                "no_vox)"
-            )
+        self.channel: CommandChannel | None = opened_channel(
+            channel(),
+            CommandChannel,
+            self.warn,
+            f"{self.name}: its command channel cannot be opened ({{reason}}): the FPA (VOx) "
+            "temperature is unknown (compensated at the model's reference VOx, flagged "
+            "no_vox)",
+        )
         self.frozen_frames = 0
         self.channel_errors = 0
         self.settings = {
@@ -229,6 +227,3 @@ class BosonCamera:
                 ffc_state=FfcState.IN_PROGRESS if shutter else ffc,
             )
             yield ThermalFrame(np.ascontiguousarray(image), now, n, telemetry)
-
-    def close(self) -> None:
-        self.capture.close()

@@ -17,6 +17,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..calibration import Calibration
 from ..errors import InputError
 from ..frames import DepthFrame, Match, StreamEvent, ThermalFrame, pair_of
@@ -27,7 +29,6 @@ from ..io.folder import (
     RowError,
     check_row,
     depth_image,
-    ir_image,
     read_rows,
     telemetry_of,
     thermal_image,
@@ -75,7 +76,7 @@ class FolderSource(Source):
         try:
             check_row(row, str(self.folder / FRAMES_FILE))
             depth = depth_image(row.depth, where, cal.depth.shape)
-            ir = None if row.ir is None else ir_image(row.ir, where, cal.depth.shape)
+            ir = None if row.ir is None else depth_image(row.ir, where, cal.depth.shape, np.uint8)
             values, float_kelvin = thermal_image(row.thermal, where, cal.thermal.shape)
         except RowError as exc:
             self.bad_rows += 1

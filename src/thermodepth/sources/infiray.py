@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..frames import FfcState, Telemetry, ThermalFrame
-from .uvc import SYSFS_VIDEO, UvcCapture, device_index, frozen, rebuild
+from .uvc import SYSFS_VIDEO, UvcCamera, frozen, opened_channel, rebuild
 
 STREAM_SIZE = (256, 384)
 """The stream thermodepth opens, width x height: picture above, temperature below."""
@@ -131,7 +131,7 @@ def open_vendor_channel() -> VendorChannel | str:
     return channel
 
 
-class P2ProCamera:
+class P2ProCamera(UvcCamera):
     """Thermal frames from an InfiRay P2 Pro / Topdon TC001 (module docstring).
 
     index: the /dev/videoN number (default: the first found by USB id); timeout_s: silence
@@ -139,6 +139,8 @@ class P2ProCamera:
     where the one line about an unreadable gain goes; channel: how to open the vendor
     channel (:func:`open_vendor_channel`); gain_every_s: how often the gain is read.
     """
+
+    kind = "p2pro"
 
     def __init__(
         self,
@@ -150,19 +152,15 @@ class P2ProCamera:
         channel: Callable[[], VendorChannel | str] = open_vendor_channel,
         gain_every_s: float = 2.0,
     ) -> None:
-        if index is None:
-            index = device_index("p2pro", "", sysfs)
-        self.name = f"p2pro:{index}"
-        self.live = True
-        self.capture = UvcCapture(index, self.name, "YUYV", STREAM_SIZE, timeout_s, latency_s)
+        super().__init__(index, "YUYV", STREAM_SIZE, timeout_s, latency_s, warn, sysfs)
         self.gain_every_s = gain_every_s
-        opened = channel()
-        self.channel = opened if isinstance(opened, VendorChannel) else None
-        if self.channel is None:
-            (warn or (lambda line: None))(
-                f"{self.name}: its gain cannot be read ({opened}): frames are taken as high "
-                "gain, the camera's power-on range (-20-150 C, 1/64 K); keep it there"
-            )
+        self.channel: VendorChannel | None = opened_channel(
+            channel(),
+            VendorChannel,
+            self.warn,
+            f"{self.name}: its gain cannot be read ({{reason}}): frames are taken as high "
+            "gain, the camera's power-on range (-20-150 C, 1/64 K); keep it there",
+        )
         self.frozen_frames = 0
         self.settings = {
             "device": self.capture.device,
@@ -193,6 +191,3 @@ class P2ProCamera:
                 tlinear_resolution_k=KELVIN_PER_VALUE,
             )
             yield ThermalFrame(temperature, now, n, telemetry, preview=picture)
-
-    def close(self) -> None:
-        self.capture.close()

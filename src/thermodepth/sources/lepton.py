@@ -44,7 +44,7 @@ from .telemetry import (
     parse_telemetry,
     split_frame,
 )
-from .uvc import SYSFS_VIDEO, UvcCapture, device_index, rebuild
+from .uvc import SYSFS_VIDEO, UvcCamera, rebuild
 
 
 def no_telemetry(frame_counter: int) -> Telemetry:
@@ -54,7 +54,7 @@ def no_telemetry(frame_counter: int) -> Telemetry:
     return Telemetry(frame_counter=frame_counter, fpa_temp_k=nan, housing_temp_k=nan)
 
 
-class LeptonCamera:
+class LeptonCamera(UvcCamera):
     """Thermal frames from a Lepton on a PureThermal board (module docstring).
 
     index: the /dev/videoN number (default: the first PureThermal found); location: where the
@@ -67,6 +67,8 @@ class LeptonCamera:
     ``close()`` may be called from any thread (see :class:`~.base.DeviceGuard`).
     """
 
+    kind = "lepton"
+
     def __init__(
         self,
         index: int | None = None,
@@ -77,17 +79,11 @@ class LeptonCamera:
         latency_s: float = 0.0,
         warn: Callable[[str], None] | None = None,
     ) -> None:
-        if index is None:
-            index = device_index("lepton", "", sysfs)
-        self.index = index
+        # the Lepton 3's size with telemetry asked for; a Lepton 2.x's board gives its own
+        super().__init__(index, "Y16 ", FRAME_SHAPE[::-1], timeout_s, latency_s, warn, sysfs)
         self.location = location
         self.telemetry_timeout_s = telemetry_timeout_s
-        self.name = f"lepton:{index}"
-        self.live = True
         self.bad_frames = 0
-        self.warn = warn or (lambda line: None)
-        # the Lepton 3's size with telemetry asked for; a Lepton 2.x's board gives its own
-        self.capture = UvcCapture(index, self.name, "Y16 ", FRAME_SHAPE[::-1], timeout_s, latency_s)
         self.settings = {
             "device": self.capture.device,
             "telemetry_location": location,
@@ -146,8 +142,3 @@ class LeptonCamera:
             f"{self.name}: the telemetry rows are in the {other}, not the {self.location}: "
             f"open the camera with location={other!r}"
         )
-
-    def close(self) -> None:
-        """Stop reading; the device is released now, or by the reading thread as soon as its
-        read returns (never under a read)."""
-        self.capture.close()

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import re
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -250,3 +250,43 @@ def frozen(image: NDArray[Any], previous: NDArray[Any] | None) -> bool:
     return (
         previous is not None and image.shape == previous.shape and np.array_equal(image, previous)
     )
+
+
+class UvcCamera:
+    """What every thermal camera over UVC is: the first of its ``kind`` found unless an index
+    is given, named ``kind:N``, live, read through a :class:`UvcCapture` (``fourcc`` at
+    ``size``) and closed by it; ``warn`` is where its one-line warnings go."""
+
+    kind: str = ""
+
+    def __init__(
+        self,
+        index: int | None,
+        fourcc: str,
+        size: tuple[int, int] | None,
+        timeout_s: float,
+        latency_s: float,
+        warn: Callable[[str], None] | None,
+        sysfs: Path,
+    ) -> None:
+        if index is None:
+            index = device_index(self.kind, "", sysfs)
+        self.index = index
+        self.name = f"{self.kind}:{index}"
+        self.live = True
+        self.warn = warn or (lambda line: None)
+        self.capture = UvcCapture(index, self.name, fourcc, size, timeout_s, latency_s)
+
+    def close(self) -> None:
+        """Stop reading; the device is released now, or by the reading thread as soon as its
+        read returns (never under a read)."""
+        self.capture.close()
+
+
+def opened_channel(opened: Any, kind: type, warn: Callable[[str], None], why: str) -> Any:
+    """``opened`` when it is a ``kind`` (a camera's command channel), else None after one
+    warning: ``why`` with the reason ``opened`` gives in place of ``{reason}``."""
+    if isinstance(opened, kind):
+        return opened
+    warn(why.format(reason=opened))
+    return None
