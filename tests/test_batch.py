@@ -26,6 +26,7 @@ from thermodepth.app.batch import (
     RangeTask,
     batch,
     measure_range,
+    plan,
 )
 from thermodepth.app.run import RunOptions, run
 from thermodepth.cli import app
@@ -41,7 +42,9 @@ from thermodepth.sources.sim import SimSource
 @pytest.fixture(scope="module")
 def rig_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("batch")
-    chip_settings(d, for_frames=3)  # ranges of 7 pairs cut through its counts
+    # ranges of 7 pairs cut through its counts, and through an on-delay in seconds (the
+    # warm-up reaches back 0.35 s)
+    chip_settings(d, "  - {name: warm, above_c: 67.45, for_s: 0.35}\n", 3)
     for name, n in (("a", 40), ("b", 25)):
         rig = Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0), seed=len(name) + n)
         record_session(SimSource(rig), d / f"{name}.zarr", frames=n)
@@ -116,7 +119,9 @@ def test_outputs_are_those_of_run_byte_for_byte(rig_files: dict[str, Path], tmp_
         frames = read_jsonl(d / f"run_{row['recording']}" / FILES[0])
         hottest = max(f["hotspots"][0]["max_c"] for f in frames if f["hotspots"])
         assert row["status"] == "ok" and int(row["frames"]) == len(frames)
-        assert int(row["alarms:hot"]) == sum(e["event"] == "alarm" for e in events)
+        assert int(row["alarms:hot"]) == sum(
+            e["event"] == "alarm" and e["rule"] == "hot" for e in events
+        )
         assert float(row["hottest_c"]) == hottest
     import pyarrow.parquet as pq
 
@@ -361,3 +366,19 @@ def test_frame_lines_are_what_the_writer_writes(tmp_path: Path) -> None:
         HOTSPOTS_HEADER + "".join(lines.hotspots)
     ).encode()
     assert (tmp_path / FILES[0]).read_text() == lines.frame
+
+
+def test_rules_that_remember_everything_make_one_task_per_recording(
+    rig_files: dict[str, Path],
+) -> None:
+    d = rig_files["dir"]
+    for rule, whole in (
+        ("{name: r, above_c: 60, for_s: 2}", False),
+        ("{name: r, above_c: 60, latch: true}", True),
+        ("{name: r, above_c: 60, clear_below_c: 55}", True),
+        ("{name: r, above_c: 60, clear_for_s: 1}", True),
+    ):
+        (d / "r.yaml").write_text(f"alarms: [{rule}]\n")
+        spec = PipelineSpec(Settings.load(d / "r.yaml"), None, None)
+        job = plan("a", str(d / "a.zarr"), spec, 7, lambda line: None)
+        assert spec.whole_recordings == whole and (len(job.tasks) == 1) == whole, rule

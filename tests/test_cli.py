@@ -91,14 +91,15 @@ def test_a_frame_line_names_the_flags_of_its_readings(capsys: pytest.CaptureFixt
     frame = SimpleNamespace(
         in_ffc=False, index=3, thermal_time_s=0.34, vox_label="-273.15 C", hotspots=[spot],
         rois=rois, events=[{"event": "alarm", "rule": "[hot]", "value_c": 201.9, "above_c": 60,
-                            "for_frames": 1}],
+                            "for_frames": 1, "level": "alarm",
+                            "condition": "above 60 C for 1 frame", "frame": 3}],
     )  # fmt: skip
     print_frame(frame)
     lines = [" ".join(line.split()) for line in capsys.readouterr().out.splitlines()]
     assert lines == [
         "frame 3 t= 0.34 s VOx -273.15 C hottest 201.90 C at 2.05 m (5000.0 cm2) "
         "[vox_outside, no_distance] [pump] 50.00 C",
-        "ALARM [hot]: 201.9 C (above 60 C for 1 frames)",
+        "ALARM [hot] [alarm]: 201.9 C (above 60 C for 1 frame), frame 3",
     ]
 
 

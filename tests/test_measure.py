@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from thermodepth.alarms import AlarmRule, AlarmTracker
 from thermodepth.camera import Intrinsics, RigidTransform, rotation_from_euler
 from thermodepth.measure import (
-    AlarmRule,
-    AlarmTracker,
     DepthRangeRoi,
     PolygonRoi,
     RectRoi,

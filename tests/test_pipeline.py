@@ -704,3 +704,28 @@ def test_depth_in_tenths_of_millimetres_measures_the_same() -> None:
     assert np.nanmedian(np.abs(a.range_thermal_m - b.range_thermal_m)) < 0.001
     assert a.hotspots[0].distance_m == pytest.approx(b.hotspots[0].distance_m, abs=0.002)
     assert a.hotspots[0].max_c == pytest.approx(b.hotspots[0].max_c, abs=0.05)
+
+
+def test_an_roi_under_its_own_emissivity_reads_as_the_whole_frame_would() -> None:
+    # a painted cabinet and a bare busbar in one view: the ROI's own emissivity and
+    # reflected temperature give its statistics exactly as settings with them for the whole
+    # frame would, and the other ROIs and the hotspots are untouched
+    rig = inspection_rig(1.0)
+    pair = rig.frame()
+    rect = (560, 280, 720, 440)
+    own = Settings(
+        rois=[
+            RoiSettings(name="plate", rect=rect),
+            RoiSettings(name="bare", rect=rect, emissivity=0.6, reflected_temp_c=30.0),
+        ]
+    )
+    whole = Settings(
+        radiometry=RadiometrySettings(emissivity=0.6, reflected_temp_c=30.0),
+        rois=[RoiSettings(name="bare", rect=rect)],
+    )
+    f = Pipeline(own, rig.calibration).process(pair)
+    g = Pipeline(whole, rig.calibration).process(pair)
+    plain, bare = f.rois
+    assert bare == replace(g.rois[0], name="bare")
+    assert bare.mean_c > plain.mean_c + 4  # the same counts read as a poorer emitter
+    assert plain == Pipeline(Settings(rois=[own.rois[0]]), rig.calibration).process(pair).rois[0]

@@ -234,7 +234,7 @@ class Radiometry:
         return self if output == self.output else replace(self, output=output)
 
 
-def _checked(name: str) -> AfterValidator:
+def checked_condition(name: str) -> AfterValidator:
     """A pydantic check of one condition field (:func:`condition_problem`)."""
 
     def check(value: float | None) -> float | None:
@@ -248,12 +248,12 @@ def _checked(name: str) -> AfterValidator:
 class ConditionsSchema(StrictSchema):
     """:class:`Conditions` as a file or a settings section holds them (same names)."""
 
-    emissivity: Annotated[float, _checked("emissivity")] = 0.95
-    ambient_temp_c: Annotated[float, _checked("ambient_temp_c")] = 25.0
-    reflected_temp_c: Annotated[float | None, _checked("reflected_temp_c")] = None
-    humidity_pct: Annotated[float, _checked("humidity_pct")] = 50.0
-    window_transmission: Annotated[float, _checked("window_transmission")] = 1.0
-    window_temp_c: Annotated[float | None, _checked("window_temp_c")] = None
+    emissivity: Annotated[float, checked_condition("emissivity")] = 0.95
+    ambient_temp_c: Annotated[float, checked_condition("ambient_temp_c")] = 25.0
+    reflected_temp_c: Annotated[float | None, checked_condition("reflected_temp_c")] = None
+    humidity_pct: Annotated[float, checked_condition("humidity_pct")] = 50.0
+    window_transmission: Annotated[float, checked_condition("window_transmission")] = 1.0
+    window_temp_c: Annotated[float | None, checked_condition("window_temp_c")] = None
 
     def conditions(self) -> Conditions:
         fields_ = {k: getattr(self, k) for k in ConditionsSchema.model_fields}

@@ -1,4 +1,5 @@
-"""Measurements on fused frames: ROI statistics, spot temperatures, hotspots in 3D, alarms.
+"""Measurements on fused frames: ROI statistics, spot temperatures, hotspots in 3D (the
+alarm rules that watch them: :mod:`thermodepth.alarms`).
 
 Pure functions over arrays; the pipeline calls them on every fused frame. Temperatures in
 Celsius (the user's unit), lengths in metres, areas in m^2, power in watts.
@@ -14,7 +15,7 @@ footprint and optics blur average it with its surroundings), the usual measureme
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
@@ -367,83 +368,6 @@ def find_hotspots(
         )
     out.sort(key=lambda h: -h.max_c)
     return out
-
-
-# ---------------------------------------------------------------------------------------------
-# Alarms
-# ---------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class AlarmRule:
-    """Raise when ``what`` is above ``above_c`` for ``for_frames`` frames in a row.
-
-    what: ``"hotspot"`` (the hottest hotspot's max) or the name of an ROI (its max).
-    """
-
-    name: str
-    above_c: float
-    for_frames: int = 1
-    what: str = "hotspot"
-
-    def __post_init__(self) -> None:
-        if self.for_frames < 1:
-            raise ValueError(f"alarm {self.name!r}: for_frames must be >= 1, got {self.for_frames}")
-
-
-@dataclass
-class AlarmTracker:
-    """Counts consecutive frames over each rule; emits an event when a rule trips and when
-    it clears. A rule is active while its count reaches ``for_frames``. Events are plain
-    dicts ready for JSON lines."""
-
-    rules: Sequence[AlarmRule]
-    counts: dict[str, int] = field(default_factory=dict)
-
-    def update(
-        self, time_s: float, frame_index: int, hotspots: Sequence[Hotspot], rois: Iterable[RoiStats]
-    ) -> list[dict[str, Any]]:
-        by_name = {r.name: r for r in rois}
-        events = []
-        for rule in self.rules:
-            if rule.what == "hotspot":
-                subject: Any = hotspots[0] if hotspots else None
-                value = subject.max_c if subject else float("nan")
-            else:
-                subject = by_name.get(rule.what)
-                value = subject.max_c if subject and subject.n else float("nan")
-            over = bool(np.isfinite(value) and value > rule.above_c)
-            count = self.counts.get(rule.name, 0)
-            was_active = count >= rule.for_frames
-            self.counts[rule.name] = count + 1 if over else 0
-            if self.counts[rule.name] >= rule.for_frames and not was_active:
-                events.append(_event("alarm", rule, time_s, frame_index, value, subject))
-            elif not over and was_active:
-                events.append(_event("clear", rule, time_s, frame_index, value, subject))
-        return events
-
-
-def _event(
-    kind: str, rule: AlarmRule, time_s: float, frame_index: int, value: float, subject: Any
-) -> dict[str, Any]:
-    event: dict[str, Any] = {
-        "event": kind,
-        "rule": rule.name,
-        "time_s": round(time_s, 4),
-        "frame": frame_index,
-        "above_c": rule.above_c,
-        "for_frames": rule.for_frames,
-        "value_c": None if not np.isfinite(value) else round(value, 3),
-    }
-    if isinstance(subject, Hotspot):
-        event["hotspot"] = {
-            k: v
-            for k, v in subject.as_dict().items()
-            if k in ("max_c", "mean_c", "centroid_m", "distance_m", "area_m2", "resolvable")
-        }
-    elif isinstance(subject, RoiStats):
-        event["roi"] = subject.name
-    return event
 
 
 def hotspot_box_on_depth(

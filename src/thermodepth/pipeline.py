@@ -30,24 +30,23 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Collection
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import IntFlag
 from functools import cached_property, partial
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import AfterValidator, Field, PrivateAttr, model_validator
 
+from .alarms import AlarmRule, AlarmTracker
 from .calibration import Calibration
 from .compensation import CompensationModel, Flag, NoCompensation, load_model
-from .conditions import ConditionsSchema, Radiometry
+from .conditions import ConditionsSchema, Radiometry, checked_condition
 from .errors import FieldError, InputError, repeated
 from .frames import FramePair, thermal_output
 from .measure import (
-    AlarmRule,
-    AlarmTracker,
     DepthRangeRoi,
     Hotspot,
     PolygonRoi,
@@ -146,10 +145,17 @@ def _polygon_area(vertices: list[tuple[float, float]]) -> float:
 
 
 class RoiSettings(StrictSchema):
+    """An ROI: one shape (``rect``, ``polygon`` or ``depth_range_m``) and, optionally, the
+    viewing conditions of what it covers where they differ from the settings' radiometry
+    (a painted cabinet and a bare busbar in one view): ``emissivity`` and
+    ``reflected_temp_c``."""
+
     name: str
     rect: tuple[int, int, int, int] | None = None
     polygon: list[tuple[float, float]] | None = Field(default=None, min_length=3)
     depth_range_m: tuple[float, float] | None = None
+    emissivity: Annotated[float | None, checked_condition("emissivity")] = None
+    reflected_temp_c: Annotated[float | None, checked_condition("reflected_temp_c")] = None
 
     @model_validator(mode="after")
     def _one_shape(self) -> RoiSettings:
@@ -183,10 +189,39 @@ class RoiSettings(StrictSchema):
 
 
 class AlarmSettings(StrictSchema):
+    """An alarm rule (:class:`~thermodepth.alarms.AlarmRule`; docs/pipeline.md): one
+    condition (``above_c``, ``below_c``, ``rise_c_per_min`` over ``rise_window_s``, or
+    ``delta_c`` against the ROI ``relative_to``) on ``what`` (``hotspot`` or an ROI, its
+    ``stat``), held ``for_s`` seconds (or ``for_frames`` frames); cleared past
+    ``clear_below_c`` / ``clear_above_c`` for ``clear_for_s``; ``latch``: raised until
+    acknowledged; ``level``: warning or alarm."""
+
     name: str
-    above_c: TempC
-    for_frames: int = Field(default=1, ge=1)
     what: str = "hotspot"
+    level: Literal["warning", "alarm"] = "alarm"
+    above_c: TempC | None = None
+    below_c: TempC | None = None
+    rise_c_per_min: float | None = Field(default=None, gt=0)
+    rise_window_s: float = Field(default=60.0, gt=0)
+    delta_c: float | None = Field(default=None, gt=0)
+    relative_to: str | None = None
+    stat: Literal["max", "mean", "min"] | None = None
+    for_frames: int = Field(default=1, ge=1)
+    for_s: float | None = Field(default=None, ge=0)
+    clear_below_c: TempC | None = None
+    clear_above_c: TempC | None = None
+    clear_for_s: float = Field(default=0.0, ge=0)
+    latch: bool = False
+
+    def rule(self) -> AlarmRule:
+        return AlarmRule(**self.model_dump())
+
+    @model_validator(mode="after")
+    def _a_rule(self) -> AlarmSettings:
+        if self.for_s is not None and "for_frames" in self.model_fields_set:
+            raise ValueError("give for_s (seconds) or for_frames, not both")
+        self.rule()  # the rule's own checks, one line each
+        return self
 
 
 class ViewerSettings(StrictSchema):
@@ -278,6 +313,13 @@ class Settings(StrictSchema):
                     f"alarm {a.name!r}: what={a.what!r} is neither 'hotspot' "
                     f"nor an ROI name ({', '.join(sorted(names)) or 'none'})"
                 )
+            if a.relative_to is not None and a.relative_to not in names:
+                raise ValueError(
+                    f"alarm {a.name!r}: relative_to={a.relative_to!r} is not an ROI name "
+                    f"({', '.join(sorted(names)) or 'none'})"
+                )
+            if a.stat is not None and a.what == "hotspot":
+                raise ValueError(f"alarm {a.name!r}: stat is for an ROI (a hotspot's max)")
         return self
 
 
@@ -424,7 +466,18 @@ class Pipeline:
         regions = [
             roi_region(roi, calibration.depth.shape, calibration.depth_scale_m) for roi in self.rois
         ]
-        self._regions = Regions(regions, calibration.depth.height)
+        # ROIs under the settings' conditions are summed while the frame's temperature is
+        # sampled; each other set of conditions (an ROI's emissivity, reflected temperature)
+        # has its own temperatures and its own sampling pass
+        groups: dict[tuple[float | None, float | None], list[int]] = {}
+        for i, roi_settings in enumerate(s.rois):
+            key = (roi_settings.emissivity, roi_settings.reflected_temp_c)
+            groups.setdefault(key, []).append(i)
+        h_d = calibration.depth.height
+        self._groups = [
+            (key, members, Regions([regions[i] for i in members], h_d))
+            for key, members in groups.items()
+        ]
         for i, (roi, region) in enumerate(zip(self.rois, regions, strict=True)):
             if not isinstance(roi, DepthRangeRoi) and region.rows.start == region.rows.stop:
                 h, w = calibration.depth.shape
@@ -432,9 +485,7 @@ class Pipeline:
                     f"{s.where}: rois.{i}: {roi.name!r} lies outside the {w}x{h} depth image "
                     f"(u 0..{w - 1}, v 0..{h - 1})"
                 )
-        self.alarms = AlarmTracker(
-            [AlarmRule(a.name, a.above_c, a.for_frames, a.what) for a in s.alarms]
-        )
+        self.alarms = AlarmTracker([a.rule() for a in s.alarms])
 
     # -- steps ------------------------------------------------------------------------------
 
@@ -533,12 +584,33 @@ class Pipeline:
         )
         if frame.in_ffc:  # measurements never use the shutter's image
             return frame
-        moments = []
-        if self.rois:  # summed while the registration samples: sampled now
-            sums = self._regions.row_sums(flags)
-            frame.on_depth = sample_depth(regions=sums)
-            moments = Regions.moments(sums)
-        self.measure(frame, moments)
+        moments: list[Moments | None] = [None] * len(self.rois)
+        for (emissivity, reflected_c), members, group in self._groups:
+            if emissivity is None and reflected_c is None:  # summed while the frame is sampled
+                sums = group.row_sums(flags)
+                frame.on_depth = sample_depth(regions=sums)
+            else:  # under their own conditions: their own temperatures, sampled for them
+                own = radiometry.conditions.replace(
+                    emissivity=radiometry.conditions.emissivity
+                    if emissivity is None
+                    else emissivity,
+                    reflected_temp_c=(
+                        radiometry.conditions.reflected_temp_c
+                        if reflected_c is None
+                        else reflected_c
+                    ),
+                )
+                temp_g, flags_g = self.temperatures(
+                    pair.thermal, vox_c, distance, replace(radiometry, conditions=own)
+                )
+                flags_g |= np.where(missing, np.uint8(PixelFlag.NO_DISTANCE), np.uint8(0))
+                sums = group.row_sums(flags_g)
+                self.registration.thermal_to_depth(
+                    pair.depth, temp_g, s.registration.interpolation, nearest=near, regions=sums
+                )
+            for i, m in zip(members, Regions.moments(sums), strict=True):
+                moments[i] = m
+        self.measure(frame, [m for m in moments if m is not None])
         return frame
 
     def measure(self, frame: FusedFrame, roi_moments: list[Moments]) -> None:

@@ -7,7 +7,9 @@ measurements.FrameLines`); the client writes each recording's files when all its
 in, so they are byte for byte those of ``run --source recording:`` with the same settings.
 The alarm rules count frames across a range's start: a task first measures, without keeping
 them, the pairs before its range that rebuild that count (the largest ``for_frames`` measured
-frames, FFC frames skipped as the run skips them). Files are written into
+frames, FFC frames skipped as the run skips them, and the seconds of the rules' delays and
+windows). A rule whose state may depend on the whole past (a latch, hysteresis) makes its
+recordings one task each. Files are written into
 ``<name>.partial/`` and renamed whole, so a folder ``<name>/`` is complete;
 ``batch.json`` says which settings made the folder's results (``--resume`` completes only
 those). See docs/batch.md.
@@ -32,12 +34,12 @@ from typing import Any
 import numba
 import numpy as np
 
+from ..alarms import AlarmTracker
 from ..calibration import Calibration
 from ..compensation import CompensationModel, load_model
 from ..errors import FieldError, InputError, ThermodepthError, check_count, repeated
 from ..io.measurements import FILES, FrameLines, MeasurementWriter
 from ..io.recording import Recording
-from ..measure import AlarmTracker
 from ..pipeline import Pipeline, Settings
 from ..progress import SILENT, Reporter
 from ..registration import Registration
@@ -119,9 +121,20 @@ class PipelineSpec:
         return Pipeline(self.settings, shared.calibration, registration=shared, model=self.model)
 
     @property
-    def alarm_memory(self) -> int:
-        """Measured frames the alarm rules look back over (the largest ``for_frames``)."""
-        return max((a.for_frames for a in self.settings.alarms), default=0)
+    def alarm_memory(self) -> tuple[int, float]:
+        """Measured frames and seconds the alarm rules look back over (the largest
+        ``for_frames``; the largest of their delays and windows)."""
+        rules = [a.rule() for a in self.settings.alarms]
+        return (
+            max((r.for_frames for r in rules), default=0),
+            max((r.memory_s for r in rules), default=0.0),
+        )
+
+    @property
+    def whole_recordings(self) -> bool:
+        """Whether a rule's state may depend on the whole past (a latch, hysteresis): then
+        each recording is one task."""
+        return any(not a.rule().history_bound for a in self.settings.alarms)
 
 
 @lru_cache(maxsize=8)
@@ -184,20 +197,27 @@ def measure_range(spec: PipelineSpec, task: RangeTask) -> RangeResult:
     return result
 
 
-def _warm_up(pipe: Pipeline, rec: Recording, start: int, memory: int) -> None:
-    """Measure (and drop) the pairs before ``start`` that the alarm counts at ``start``
-    depend on: the last ``memory`` measured ones (FFC pairs are not measured). A pair that
-    turns out unreadable there is skipped as the run skips it, so go back further until
-    ``memory`` were measured or the recording's start is reached."""
-    if start == 0 or memory == 0:
+def _warm_up(pipe: Pipeline, rec: Recording, start: int, memory: tuple[int, float]) -> None:
+    """Measure (and drop) the pairs before ``start`` that the alarm states at ``start``
+    depend on: the last ``memory[0]`` measured ones (FFC pairs are not measured), reaching
+    ``memory[1]`` seconds back. A pair that turns out unreadable there is skipped as the run
+    skips it, so go back further until enough were measured or the recording's start is
+    reached."""
+    frames, seconds = memory
+    if start == 0 or (frames == 0 and seconds == 0):
         return
     measured_rows = np.flatnonzero(~rec.pair_in_ffc()[:start])
-    back = memory
+    times = rec.pair_times_s()
+    back = max(frames, 1)
     while True:
         first = int(measured_rows[-back]) if back <= measured_rows.size else 0
+        spans = times[start] - times[first] > seconds if seconds else True
+        if not spans and first > 0:
+            back *= 2
+            continue
         pipe.alarms = AlarmTracker(pipe.alarms.rules)
         measured = sum(not pipe.process(p).in_ffc for p in rec.pairs(first, start))
-        if measured >= memory or first == 0:
+        if measured >= frames or first == 0:
             return
         back *= 2
 
@@ -392,6 +412,8 @@ def plan(name: str, url: str, spec: PipelineSpec, range_pairs: int, warn: Warn) 
     if not rec.n_pairs:
         raise InputError(f"{url}: no pairs to measure (a recording of one camera, or empty)")
     spec.pipeline(rec.calibration)  # a calibration that does not fit: one line, here
+    if spec.whole_recordings:
+        range_pairs = rec.n_pairs
     starts = range(0, rec.n_pairs, range_pairs)
     tasks = tuple(RangeTask(name, url, a, min(a + range_pairs, rec.n_pairs)) for a in starts)
     return Job(name, url, rec.n_pairs, tasks)

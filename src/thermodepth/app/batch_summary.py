@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ..alarms import RAISED
 from ..io.measurements import FILES
 from ..plotting import distinct_styles, pyplot, save_figure
 
@@ -49,7 +50,7 @@ def recording_row(
     frames' (s, host clock); the hottest reading is the hottest hotspot of any frame (C, its
     centroid in the depth camera's frame, m); flags: the OR of every hotspot's and ROI's."""
     events = read_jsonl(folder / FILES[1])
-    raised = [e for e in events if e["event"] == "alarm"]
+    raised = [e for e in events if e["event"] in RAISED]
     times = [f["thermal_time_s"] for f in frames]
     hottest: dict[str, Any] | None = None
     hottest_frame: dict[str, Any] | None = None

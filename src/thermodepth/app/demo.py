@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from .. import calibrate
+from ..alarms import RAISED
 from ..board import BoardSpec
 from ..calibration import Calibration
 from ..compensation import (
@@ -377,7 +378,7 @@ def _inspection(
             hot = last.hotspots[0] if last.hotspots else None
             nan = float("nan")
             chip_max_c = hot.max_c if hot else nan
-            alarms = sum(e["event"] == "alarm" for f in frames for e in f.events)
+            alarms = sum(e["event"] in RAISED for f in frames for e in f.events)
             row += [plate, chip_max_c]
             if name == "radiance":
                 err = float(np.linalg.norm(np.array(hot.centroid_m) - truth_chip)) if hot else nan

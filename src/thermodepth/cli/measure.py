@@ -207,6 +207,7 @@ def run_cmd(
     thermal_camera: ThermalCamera = None,
 ) -> None:
     """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
+    from ..alarms import RAISED
     from ..app.run import RunOptions, run
     from ..sinks import CallbackSink
 
@@ -229,7 +230,7 @@ def run_cmd(
     result = run(options, [] if quiet else [CallbackSink(print_frame)], warn_line)
     console.print(
         f"{result.frames} frames fused ({result.shutter_frames} while the shutter was "
-        f"closed), {sum(e['event'] == 'alarm' for e in result.events)} alarms; "
+        f"closed), {sum(e['event'] in RAISED for e in result.events)} alarms; "
         f"stopped: {result.stopped}"
     )
     print_outputs(result)
@@ -283,6 +284,8 @@ def _flag_note(flags: int) -> str:
 
 def print_frame(fused: FusedFrame) -> None:
     """One line per fused frame: time, VOx, the hottest hotspot, ROIs, alarms."""
+    from ..alarms import event_line
+
     if fused.in_ffc:
         console.print(
             f"[dim]frame {fused.index:5d}  t={fused.thermal_time_s:8.2f} s  shutter "
@@ -300,8 +303,5 @@ def print_frame(fused: FusedFrame) -> None:
     parts += [f"{r.name} {r.mean_c:.2f} C{_flag_note(r.flags)}" for r in fused.rois if r.n]
     console.print("  ".join(parts), highlight=False, soft_wrap=True, markup=False)
     for e in fused.events:
-        style = "bold red" if e["event"] == "alarm" else "green"
-        console.print(
-            f"[{style}]{e['event'].upper()} {escape(e['rule'])}: {e['value_c']} C "
-            f"(above {e['above_c']} C for {e['for_frames']} frames)[/{style}]"
-        )
+        style = "bold red" if e["event"] in ("alarm", "escalated") else "green"
+        console.print(f"[{style}]{escape(event_line(e))}[/{style}]")

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..alarms import KINDS
 from ..errors import FieldError, InputError, ThermodepthError
 from ..io.measurements import jsonable
 from ..pipeline import FusedFrame, MqttSettings
@@ -99,12 +100,17 @@ def alarm_message(event: dict[str, Any], fused: FusedFrame) -> dict[str, Any]:
     message = {
         "event": event["event"],
         "rule": event["rule"],
+        "level": event.get("level", "alarm"),
+        "condition": event.get("condition"),
         "value_c": event["value_c"],
-        "above_c": event["above_c"],
+        **{k: event[k] for k in KINDS if k in event},
         "frame": event["frame"],
         "time_s": event["time_s"],
-        "vox_temp_c": round(fused.vox_temp_c, 3),
+        "vox_temp_c": None if fused.vox_temp_c != fused.vox_temp_c else round(fused.vox_temp_c, 3),
     }
+    for key in ("by", "at_utc"):
+        if key in event:
+            message[key] = event[key]
     if "hotspot" in event:
         message["position_m"] = event["hotspot"]["centroid_m"]
         message["distance_m"] = event["hotspot"]["distance_m"]

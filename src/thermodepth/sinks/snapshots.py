@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..alarms import RAISED
 from ..figures import display_range_c, plot_overlay
 from ..io.pointcloud import write_ply
 from ..pipeline import FusedFrame
@@ -29,7 +30,7 @@ class SnapshotSink(BaseSink):
 
     def frame(self, fused: FusedFrame) -> None:
         self._seen += 1
-        alarms = [e["rule"] for e in fused.events if e["event"] == "alarm"]
+        alarms = [e["rule"] for e in fused.events if e["event"] in RAISED]
         if fused.in_ffc or not (alarms or (self._seen - 1) % self.every == 0):
             return
         if self.range_c is None:

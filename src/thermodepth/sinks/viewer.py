@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..alarms import RAISED, event_line
 from ..errors import FieldError, ThermodepthError
 from ..frames import Match, StreamEvent
 from ..measure import PolygonRoi, RectRoi
@@ -198,10 +199,9 @@ class ViewerSink(BaseSink):
             rec.log(f"plots/roi/{r.name}/mean_c", rr.Scalars(r.mean_c))
             rec.log(f"plots/roi/{r.name}/max_c", rr.Scalars(r.max_c))
         for e in fused.events:
-            level = rr.TextLogLevel.WARN if e["event"] == "alarm" else rr.TextLogLevel.INFO
-            value = "" if e["value_c"] is None else f": {e['value_c']} C"
-            text = f"{e['event']} {e['rule']} (above {e['above_c']} C){value}, frame {e['frame']}"
-            rec.log("alarms", rr.TextLog(text, level=level))
+            raised = e["event"] in RAISED
+            level = rr.TextLogLevel.WARN if raised else rr.TextLogLevel.INFO
+            rec.log("alarms", rr.TextLog(event_line(e), level=level))
         self.logged += 1
 
     def cloud(self, fused: FusedFrame) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:

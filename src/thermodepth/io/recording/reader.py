@@ -415,6 +415,15 @@ class Recording:
         state = thermal[np.clip(rows[:, 1], 0, len(thermal) - 1), THERMAL_META.index("ffc_state")]
         return np.asarray(state == FfcState.IN_PROGRESS)
 
+    def pair_times_s(self) -> NDArray[np.float64]:
+        """Per row of the pairs table: the thermal frame's time (s; NaN where unknown), from
+        the tables read on open."""
+        rows, thermal = self._pairs.rows, self._thermal.rows
+        if not len(rows) or not len(thermal):
+            return np.full(len(rows), np.nan)
+        index = np.clip(rows[:, 1], 0, len(thermal) - 1)
+        return np.asarray(thermal[index, THERMAL_META.index("time_s")], dtype=np.float64)
+
 
 READ_AHEAD = 8
 """Frames or pairs a replay reads at once (a batch), one batch per reading thread."""
