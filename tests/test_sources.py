@@ -3,6 +3,7 @@ UVC (a stand-in VideoCapture), device listing from sysfs."""
 
 from __future__ import annotations
 
+import itertools
 import re
 import threading
 import time
@@ -249,7 +250,7 @@ def test_paired_source_counters_merge_both_cameras(monkeypatch: pytest.MonkeyPat
 @pytest.mark.parametrize(
     ("spec", "message"),
     [
-        ("webcam", "source: unknown 'webcam'; expected one of sim[:thermal=CAMERA,depth=WxH]"),
+        ("webcam", "source: unknown 'webcam'; expected one of sim[:thermal=CAMERA,depth=WxH,"),
         (
             "lepton+realsense",
             "source: cannot combine 'lepton+realsense'; expected a depth camera and a thermal "
@@ -257,7 +258,10 @@ def test_paired_source_counters_merge_both_cameras(monkeypatch: pytest.MonkeyPat
             "p2pro, boson",
         ),
         ("realsense+lepton+boson", "source: cannot combine 'realsense+lepton+boson'"),
-        ("sim:3", "source: sim:3: expected KEY=VALUE with KEY one of thermal, depth"),
+        ("sim:3", "source: sim:3: expected KEY=VALUE with KEY one of thermal, depth, pace, faults"),
+        ("sim:pace=slow", "source: sim:pace=slow: pace: expected real"),
+        ("sim:faults=melt@2s", "source: faults: 'melt@2s': expected KIND@Ts or KIND@Ts+Ds"),
+        ("sim:faults=unplug@2s", "source: faults: 'unplug@2s': unplug needs a duration"),
         ("sim:thermal=flir", "thermal_camera: unknown 'flir'; choose from lepton3, lepton3.5"),
         ("sim:depth=1280x800", "depth_mode: '1280x800': the simulated D435 offers 1280x720"),
         ("sim:depth=wide", "depth_mode: 'wide': expected WIDTHxHEIGHT[@FPS], e.g. 848x480@30"),
@@ -334,6 +338,50 @@ def test_sim_spec_says_once_that_a_given_calibration_is_not_used() -> None:
     assert src.calibration is not None
     assert src.calibration.to_dict() == truth.to_dict()  # the rig's truth, not the user's
     src.close()
+
+
+def test_sim_unplug_loses_the_device_until_its_time_is_up() -> None:
+    spec = "sim:pace=real,faults=unplug@0.3s+0.4s"
+    src = open_source(spec)
+    times = []
+    with pytest.raises(DeviceLostError, match=r"sim: unplugged at 0.3 s \(for 0.4 s\)"):
+        for pair in src:
+            times.append(pair.thermal_time_s)
+    assert times and max(times) < 0.3
+    with pytest.raises(InputError, match="no simulated device"):
+        open_source(spec)  # still unplugged: the device's time goes on across openings
+    time.sleep(0.45)
+    again = open_source(spec, frames=2)
+    assert [p.thermal_time_s >= 0.7 for p in again] == [True, True]
+
+
+def test_sim_stall_sends_nothing_until_closed_then_goes_on() -> None:
+    src = open_source("sim:pace=real,faults=stall@0.2s")
+    got: list[float] = []
+    reader = threading.Thread(target=lambda: got.extend(p.thermal_time_s for p in src))
+    reader.start()
+    time.sleep(0.6)
+    assert reader.is_alive() and got and max(got) < 0.2  # stalled, not ended
+    src.close()
+    reader.join(1.0)
+    assert not reader.is_alive()  # close() unblocks a stalled camera
+    assert len(list(open_source("sim:pace=real,faults=stall@0.2s", frames=3))) == 3  # once
+
+
+def test_sim_corrupt_ffc_storm_and_vox_ramp_change_the_frames() -> None:
+    src = open_source("sim:pace=real,faults=corrupt@0.25s+0.25s;ffc-storm@0s+0.2s,vox-ramp@0s")
+    pairs = list(itertools.islice(src, 6))
+    src.close()
+    clean = [p for p in pairs if not 0.25 <= p.thermal_time_s < 0.5]
+    bad = [p for p in pairs if 0.25 <= p.thermal_time_s < 0.5]
+    assert bad and clean
+    assert all(p.thermal.std() > 10 * c.thermal.std() for p in bad for c in clean)
+    storm = [p.telemetry.ffc_state for p in pairs if p.thermal_time_s < 0.18]
+    assert storm and set(storm) == {FfcState.IN_PROGRESS}
+    fpa = [p.telemetry.fpa_temp_k for p in pairs]
+    assert fpa[-1] - fpa[0] == pytest.approx(
+        pairs[-1].thermal_time_s - pairs[0].thermal_time_s, rel=0.05
+    )  # 1 K/s
 
 
 # -- the Lepton over UVC ----------------------------------------------------------------------

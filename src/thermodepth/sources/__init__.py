@@ -8,8 +8,9 @@ spec                              what
 ================================  =========================================================
 ``sim[:KEY=VALUE,...]``           the simulated rig (plate + 70 C chip at 1 m); keys
                                   ``thermal`` (a camera of
-                                  :data:`~thermodepth.sim.cameras.THERMAL_CAMERAS`) and
-                                  ``depth`` (a mode, ``848x480@30``)
+                                  :data:`~thermodepth.sim.cameras.THERMAL_CAMERAS`),
+                                  ``depth`` (a mode, ``848x480@30``), ``pace=real`` (in
+                                  real time) and ``faults`` (:mod:`.sim`)
 ``realsense[:SERIAL]``            a live RealSense (depth only: recordable, no pairs)
 ``realsense:FILE.bag|db3``        a RealSense recording played back (depth only)
 ``lepton[:N]``                    a Lepton 2.5/3/3.5 on a PureThermal, /dev/videoN
@@ -44,8 +45,9 @@ from .base import DeviceLostError, Source, event_time_s, with_device_depth
 from .pairing import DEFAULT_MAX_SKEW_S, PairingStats, StreamPairer, pair_times
 
 SPEC_HELP = (
-    "sim[:thermal=CAMERA,depth=WxH], realsense[:SERIAL|:FILE.bag|:FILE.db3], lepton[:N], "
-    "p2pro[:N], boson[:N], DEPTH+THERMAL (realsense+lepton, realsense+p2pro, ...), "
+    "sim[:thermal=CAMERA,depth=WxH,pace=real,faults=...], "
+    "realsense[:SERIAL|:FILE.bag|:FILE.db3], lepton[:N], p2pro[:N], boson[:N], "
+    "DEPTH+THERMAL (realsense+lepton, realsense+p2pro, ...), "
     "recording:PATH, folder:PATH"
 )
 DEPTH_CAMERAS = ("realsense",)
@@ -54,7 +56,7 @@ SOURCE_KINDS = ("sim", *DEPTH_CAMERAS, *THERMAL_CAMERAS, "recording", "folder")
 _JOIN = re.compile(r"\+(?=(?:" + "|".join(SOURCE_KINDS) + r")(?::|\+|$))")
 """A '+' that joins two source specs: one followed by a source name (so that a '+' inside a
 file name, as in ``realsense:take+1.db3``, is left alone)."""
-SIM_KEYS = ("thermal", "depth")
+SIM_KEYS = ("thermal", "depth", "pace", "faults")
 
 
 def split_spec(spec: str) -> list[tuple[str, str]]:
@@ -68,16 +70,24 @@ def split_spec(spec: str) -> list[tuple[str, str]]:
 
 
 def sim_options(arg: str) -> dict[str, str]:
-    """The ``KEY=VALUE,...`` of a ``sim:`` spec; FieldError (``source``) for a key it does
-    not know."""
+    """The ``KEY=VALUE,...`` of a ``sim:`` spec (a part without ``=`` goes on the value
+    before it: ``faults=unplug@20s+5s,stall@40s``); FieldError (``source``) for a key it
+    does not know, or ``pace`` other than ``real``."""
     options: dict[str, str] = {}
+    key = None
     for item in filter(None, (x.strip() for x in arg.split(","))):
-        key, eq, value = item.partition("=")
-        if not eq or key not in SIM_KEYS or not value:
+        name, eq, value = item.partition("=")
+        if not eq and key == "faults":
+            options["faults"] += "," + item
+            continue
+        if not eq or name not in SIM_KEYS or not value:
             raise FieldError(
                 "source", f"sim:{arg}: expected KEY=VALUE with KEY one of {', '.join(SIM_KEYS)}"
             )
+        key = name
         options[key] = value
+    if options.get("pace", "real") != "real":
+        raise FieldError("source", f"sim:{arg}: pace: expected real (in real time)")
     return options
 
 
@@ -241,13 +251,16 @@ def open_source(
             ),
         )
     if kind == "sim":
-        from .sim import SimSource
+        from .sim import SimSource, parse_faults
 
         options = sim_options(arg)
         src = SimSource(
             frames=frames,
             thermal=options.get("thermal", thermal_camera),
             depth=options.get("depth", depth_mode),
+            paced="pace" in options,
+            faults=parse_faults(options.get("faults", "")),
+            device=text,
         )
         if with_ir:
             src.rig.with_ir = True
