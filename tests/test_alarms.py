@@ -48,10 +48,10 @@ def test_clear_for_s_and_latch_until_acknowledged() -> None:
     t = AlarmTracker([rule])
     got = run(t, [[roi("b", v)] for v in [85, 70, 70, 70, 70]])
     assert got[0] == ["alarm bus"] and all(not e for e in got[1:])  # latched: no clear
-    event = t.acknowledge("bus", "operator jane", at_utc="2026-11-26T10:00:00+00:00")
-    assert event["event"] == "acknowledged" and event["by"] == "operator jane"
-    after = t.update(3.0, 6, [], [roi("b", 70)])
-    assert [e["event"] for e in after] == ["acknowledged", "clear"]
+    after = t.acknowledge("bus", "operator jane", at_utc="2026-11-26T10:00:00+00:00")
+    assert after[0]["by"] == "operator jane" and after[0]["frame"] == 4  # the last frame's
+    assert [e["event"] for e in after] == ["acknowledged", "clear"]  # latched, value back
+    assert t.update(3.0, 6, [], [roi("b", 70)]) == []
     assert after[1]["acknowledged"] == {
         "by": "operator jane",
         "at_utc": "2026-11-26T10:00:00+00:00",
@@ -63,8 +63,8 @@ def test_clear_for_s_and_latch_until_acknowledged() -> None:
         t.acknowledge("nope", "jane")
     # acknowledged while still hot: it clears when the value comes back, no new ack needed
     t.update(4.0, 7, [], [roi("b", 90)])
-    t.acknowledge("bus", "jane")
-    assert [e["event"] for e in t.update(4.5, 8, [], [roi("b", 90)])] == ["acknowledged"]
+    assert [e["event"] for e in t.acknowledge("bus", "jane")] == ["acknowledged"]
+    assert t.update(4.5, 8, [], [roi("b", 90)]) == []
     assert run(t, [[roi("b", 70)]] * 4, dt=0.5)[-1] == []
     assert t.raised == []
 

@@ -12,8 +12,8 @@ The condition must hold ``for_s`` seconds (or, as before, ``for_frames`` frames 
 raise the rule (an on-delay: frame rates differ per camera). It clears once the value is back
 past ``clear_below_c`` (``clear_above_c`` for a ``below_c`` rule; hysteresis, default the limit
 itself) for ``clear_for_s`` seconds. A ``latch`` rule stays raised after that until someone
-acknowledges it (:meth:`AlarmTracker.acknowledge`, who and when kept). Any raised rule may be
-acknowledged. A rule of level ``alarm`` raised while a ``warning`` rule on the same subject is
+acknowledges it (:meth:`AlarmTracker.acknowledge`, who and when kept; it may come from another
+thread than the frames'). Any raised rule may be acknowledged. A rule of level ``alarm`` raised while a ``warning`` rule on the same subject is
 raised is an escalation.
 
 Every change of state is an event, a plain dict ready for JSON lines: ``event`` ``alarm``
@@ -23,6 +23,7 @@ condition in words, the frame and its time, the value and what it was measured o
 
 from __future__ import annotations
 
+import threading
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -168,8 +169,8 @@ class AlarmTracker:
     def __init__(self, rules: Sequence[AlarmRule]) -> None:
         self.rules = list(rules)
         self.states = {r.name: RuleState() for r in self.rules}
-        self._pending: list[dict[str, Any]] = []  # acknowledgements to report at the next frame
         self._last: tuple[float, int] = (float("nan"), -1)
+        self._lock = threading.Lock()  # an acknowledgement may come from another thread
 
     @property
     def raised(self) -> list[str]:
@@ -212,9 +213,19 @@ class AlarmTracker:
         hotspots: Sequence[Hotspot],
         rois: Iterable[RoiStats],
     ) -> list[dict[str, Any]]:
-        """The events of a measured frame (and of acknowledgements since the last one)."""
+        """The events of a measured frame."""
+        with self._lock:
+            return self._update(time_s, frame_index, hotspots, rois)
+
+    def _update(
+        self,
+        time_s: float,
+        frame_index: int,
+        hotspots: Sequence[Hotspot],
+        rois: Iterable[RoiStats],
+    ) -> list[dict[str, Any]]:
         by_name = {r.name: r for r in rois}
-        events, self._pending = self._pending, []
+        events: list[dict[str, Any]] = []
         self._last = (time_s, frame_index)
         for rule in self.rules:
             s = self.states[rule.name]
@@ -263,26 +274,29 @@ class AlarmTracker:
         s.acknowledged = None
         return event
 
-    def acknowledge(self, rule_name: str, by: str, at_utc: str | None = None) -> dict[str, Any]:
-        """Acknowledge a raised rule: who (``by``) and when (UTC, now by default) are kept
-        and told in an ``acknowledged`` event at the next frame (a latched rule whose value
-        has come back clears with it). KeyError for an unknown rule, ValueError for one not
-        raised."""
+    def acknowledge(
+        self, rule_name: str, by: str, at_utc: str | None = None
+    ) -> list[dict[str, Any]]:
+        """Acknowledge a raised rule: who (``by``) and when (UTC, now by default) are kept.
+        Returns its events at once, at the time and frame of the last update: the
+        ``acknowledged`` event and, for a latched rule whose value has come back, its
+        ``clear``. KeyError for an unknown rule, ValueError for one not raised."""
         rule = next((r for r in self.rules if r.name == rule_name), None)
         if rule is None:
             raise KeyError(rule_name)
-        s = self.states[rule_name]
-        if not s.raised:
-            raise ValueError(f"alarm {rule_name!r} is not raised")
-        when = at_utc or datetime.now(timezone.utc).isoformat(timespec="seconds")
-        s.acknowledged = {"by": by, "at_utc": when}
-        time_s, frame = self._last
-        event = _event("acknowledged", rule, time_s, frame, float("nan"), None)
-        event.update(s.acknowledged)
-        self._pending.append(event)
-        if rule.latch and s.back_s is not None:
-            self._pending.append(self._clear(rule, s, time_s, frame, float("nan"), None))
-        return event
+        with self._lock:
+            s = self.states[rule_name]
+            if not s.raised:
+                raise ValueError(f"alarm {rule_name!r} is not raised")
+            when = at_utc or datetime.now(timezone.utc).isoformat(timespec="seconds")
+            s.acknowledged = {"by": by, "at_utc": when}
+            time_s, frame = self._last
+            event = _event("acknowledged", rule, time_s, frame, float("nan"), None)
+            event.update(s.acknowledged)
+            events = [event]
+            if rule.latch and s.back_s is not None:
+                events.append(self._clear(rule, s, time_s, frame, float("nan"), None))
+            return events
 
 
 def _event(

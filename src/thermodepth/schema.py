@@ -51,25 +51,33 @@ def _describe_input(value: Any) -> str:
     return "nothing" if value is None else repr(value)
 
 
+def validation_lines(exc: ValidationError) -> list[str]:
+    """Each problem of a pydantic validation as one line: ``field.path: message``."""
+    lines = []
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"])
+        if err["type"] == "missing":
+            msg = "missing"
+        elif err["type"] == "extra_forbidden":
+            msg = "unknown key"
+        elif err["type"] in ("model_type", "model_attributes_type", "dict_type"):
+            # pydantic names its own class here ("instance of CameraSchema"): say what is wanted
+            msg = f"expected a mapping of keys, got {_describe_input(err.get('input'))}"
+        else:
+            msg = err["msg"].removeprefix("Value error, ")
+            # a whole mapping (a check across its keys) would print the whole file section
+            if "input" in err and not isinstance(err["input"], dict):
+                msg += f" (got {err['input']!r})"
+        lines.append(f"{loc}: {msg}" if loc else msg)
+    return lines
+
+
 def describe_validation_error(exc: ValidationError) -> str:
-    """One line for the first error of a pydantic validation: ``field.path: message``."""
-    err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"])
-    if err["type"] == "missing":
-        msg = "missing"
-    elif err["type"] == "extra_forbidden":
-        msg = "unknown key"
-    elif err["type"] in ("model_type", "model_attributes_type", "dict_type"):
-        # pydantic names its own class here ("instance of CameraSchema"): say what is wanted
-        msg = f"expected a mapping of keys, got {_describe_input(err.get('input'))}"
-    else:
-        msg = err["msg"].removeprefix("Value error, ")
-        # a whole mapping (a check across its keys) would print the whole file section
-        if "input" in err and not isinstance(err["input"], dict):
-            msg += f" (got {err['input']!r})"
-    more = len(exc.errors()) - 1
-    suffix = f" [and {more} more problem{'s' if more > 1 else ''}]" if more else ""
-    return f"{loc}: {msg}{suffix}" if loc else f"{msg}{suffix}"
+    """One line for the first problem of a pydantic validation (:func:`validation_lines`),
+    saying how many more there are."""
+    lines = validation_lines(exc)
+    more = len(lines) - 1
+    return lines[0] + (f" [and {more} more problem{'s' if more > 1 else ''}]" if more else "")
 
 
 S = TypeVar("S", bound=BaseModel)

@@ -57,6 +57,12 @@ class CompensationModel(Protocol):
         over; None when the model does not use the VOx temperature."""
         ...
 
+    @property
+    def vox_range_c(self) -> tuple[float, float] | None:
+        """The VOx temperatures (C, low and high) the model was fitted over; None when it
+        does not use the VOx temperature (a monitor's fail-safe watches it)."""
+        ...
+
     def radiometry(
         self, conditions: Conditions, planck: PlanckConstants | None, method: str
     ) -> Radiometry:

@@ -28,6 +28,7 @@ class NoCompensation:
     method: ClassVar[str] = "none"
     #: the VOx temperature does not enter
     vox_reference_c: ClassVar[float | None] = None
+    vox_range_c: ClassVar[tuple[float, float] | None] = None
 
     @classmethod
     def fit(

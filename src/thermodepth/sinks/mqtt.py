@@ -145,62 +145,53 @@ def measurement_message(fused: FusedFrame) -> dict[str, Any]:
     }
 
 
-class MqttSink(BaseSink):
-    """Publishes the run to the broker at ``url`` (see the module docstring); ``warn`` hears
-    the broker going away and coming back, with how long it was gone."""
+class MqttConnection:
+    """A paho client connected to one broker for as long as it is needed: it connects (one
+    InputError line when it cannot or is refused), reconnects by itself (telling ``warn`` when
+    the broker goes away and when it is back, and for how long: ``outages``), keeps QoS 1
+    messages while the broker is away (up to ``settings.max_queued``), calls a message's
+    ``on_ack`` when the broker has it, and hands what arrives on subscribed topics to their
+    handler (resubscribed after every reconnection). ``will``: the last will's topic and
+    payload (retained, QoS 1)."""
 
     def __init__(
         self,
-        url: str,
-        settings: MqttSettings | None = None,
-        warn: Callable[[str], None] | None = None,
+        target: MqttTarget,
+        settings: MqttSettings,
+        warn: Callable[[str], None],
+        will: tuple[str, str],
+        client_id: str,
     ) -> None:
-        self.target = MqttTarget.parse(url)
-        self.settings = settings or MqttSettings()
-        self.warn = warn or (lambda message: None)
+        self.target, self.settings, self.warn = target, settings, warn
+        self.will, self.client_id = will, client_id
         self.client: Any = None
-        self.alarms_sent = 0
-        self.alarms_acked = 0
-        self.measurements_sent = 0
-        self.dropped = 0
         self.outages: list[float] = []
         self._lock = threading.Lock()
-        self._pending: set[int] = set()  # alarm message ids not yet acknowledged
+        self._pending: dict[int, Callable[[], None]] = {}  # message id -> on_ack
         self._early: dict[int, float] = {}  # ids acknowledged before publish returned them
+        self._handlers: dict[str, Callable[[str, bytes], None]] = {}
         self._lost_at: float | None = None
-        self._last_summary = float("-inf")
         self._connected = threading.Event()
         self._refused: str | None = None
         self._closing = False
 
-    def topic(self, leaf: str) -> str:
-        return f"{self.target.prefix}/{leaf}"
-
-    def check(self) -> None:
-        try:
-            import paho.mqtt.client  # noqa: F401
-        except ImportError:
-            raise ThermodepthError(INSTALL) from None
-        read_password(self.settings)
-
-    def open(self, context: RunContext) -> None:
+    def connect(self) -> None:
         import paho.mqtt.client as mqtt
 
         t, s = self.target, self.settings
-        client_id = s.client_id or f"thermodepth-{socket.gethostname()}-{os.getpid()}"
-        client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id)
+        client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=self.client_id)
         password = read_password(s)
         if t.username is not None or password is not None:
             client.username_pw_set(t.username or "", password)
         if t.tls:
             client.tls_set(ca_certs=None if s.ca_file is None else str(s.ca_file))
-        will = json.dumps({"state": "died", "source": context.source.name})
-        client.will_set(self.topic("status"), will, qos=1, retain=True)
+        client.will_set(self.will[0], self.will[1], qos=1, retain=True)
         client.reconnect_delay_set(min_delay=1, max_delay=5)
         client.max_queued_messages_set(s.max_queued)
         client.on_connect = self._on_connect
         client.on_disconnect = self._on_disconnect
         client.on_publish = self._on_publish
+        client.on_message = self._on_message
         self.client = client
         try:
             client.connect(t.host, t.port, keepalive=10)
@@ -213,9 +204,6 @@ class MqttSink(BaseSink):
             client.disconnect()
             why = self._refused or f"no answer in {s.connect_timeout_s:g} s"
             raise InputError(f"{t.where}: the MQTT broker refused the connection: {why}")
-        status = {"state": "running", "source": context.source.name, "since_utc": _now()}
-        info = client.publish(self.topic("status"), json.dumps(status), qos=1, retain=True)
-        self._published(info.mid, alarm=False)
 
     # -- paho's callbacks (its network thread) ---------------------------------------------
 
@@ -224,15 +212,17 @@ class MqttSink(BaseSink):
             hint = " (wrong username or password?)" if reason.value in (134, 135) else ""
             self._refused = f"{reason} (reason code {reason.value}){hint}"
             client.disconnect()  # paho would try again for ever
-        elif self._lost_at is not None:
+            self._connected.set()
+            return
+        for topic in list(self._handlers):
+            client.subscribe(topic, qos=1)
+        if self._lost_at is not None:
             gone = time.monotonic() - self._lost_at
             self.outages.append(gone)
             self._lost_at = None
-            with self._lock:
-                queued = len(self._pending)
             self.warn(
                 f"MQTT: {self.target.where} is back after {gone:.1f} s; "
-                f"{queued} alarms still to deliver"
+                f"{self.pending} messages still to deliver"
             )
         self._connected.set()
 
@@ -250,73 +240,141 @@ class MqttSink(BaseSink):
     def _on_publish(self, client: Any, userdata: Any, mid: int, reason: Any, props: Any) -> None:
         # called under paho's own locks: take only ours, briefly (never held around paho)
         with self._lock:
-            if mid in self._pending:
-                self._pending.discard(mid)
-                self.alarms_acked += 1
-            else:
+            on_ack = self._pending.pop(mid, None)
+            if on_ack is None:
                 self._early[mid] = time.monotonic()
+        if on_ack is not None:
+            on_ack()
 
-    def _published(self, mid: int, alarm: bool) -> None:
-        """Account for message ``mid`` once ``publish`` returned it."""
+    def _on_message(self, client: Any, userdata: Any, message: Any) -> None:
+        handler = self._handlers.get(message.topic)
+        if handler is not None:
+            handler(message.topic, bytes(message.payload))
+
+    # -- use ----------------------------------------------------------------------------------
+
+    @property
+    def pending(self) -> int:
+        """Messages with an ``on_ack`` the broker has not acknowledged yet."""
         with self._lock:
-            acked = self._early.pop(mid, None) is not None
-            if alarm:
-                self.alarms_sent += 1
-                if acked:
-                    self.alarms_acked += 1
-                else:
-                    self._pending.add(mid)
-            stale = time.monotonic() - 60.0  # ids come round again after 65,535 messages
-            self._early = {m: t for m, t in self._early.items() if t > stale}
+            return len(self._pending)
 
-    # -- the run ------------------------------------------------------------------------------
-
-    def frame(self, fused: FusedFrame) -> None:
+    def publish(
+        self,
+        topic: str,
+        payload: str,
+        qos: int = 0,
+        retain: bool = False,
+        on_ack: Callable[[], None] | None = None,
+    ) -> bool:
+        """Publish; False when paho's queue is full (the message is not sent)."""
         import paho.mqtt.client as mqtt
 
-        for event in fused.events:
-            payload = json.dumps(jsonable(alarm_message(event, fused)))
-            info = self.client.publish(self.topic("alarms"), payload, qos=1)
-            if info.rc == mqtt.MQTT_ERR_QUEUE_SIZE:
-                self.dropped += 1
-                self.warn(f"MQTT: {self.settings.max_queued} alarms queued already: one dropped")
-            else:
-                self._published(info.mid, alarm=True)
-        now = time.monotonic()
-        if now - self._last_summary >= 1.0 / self.settings.measurements_hz:
-            self._last_summary = now
-            payload = json.dumps(jsonable(measurement_message(fused)))
-            info = self.client.publish(self.topic("measurements"), payload, qos=0)
-            self._published(info.mid, alarm=False)
-            self.measurements_sent += 1
+        info = self.client.publish(topic, payload, qos=qos, retain=retain)
+        if info.rc == mqtt.MQTT_ERR_QUEUE_SIZE:
+            return False
+        with self._lock:
+            acked = self._early.pop(info.mid, None) is not None
+            if on_ack is not None and not acked:
+                self._pending[info.mid] = on_ack
+            stale = time.monotonic() - 60.0  # ids come round again after 65,535 messages
+            self._early = {m: t for m, t in self._early.items() if t > stale}
+        if on_ack is not None and acked:
+            on_ack()
+        return True
 
-    def close(self, result: SessionResult) -> None:
-        if self.client is None:
-            return
-        status = {"state": "stopped", "stopped": result.stopped, "until_utc": _now()}
-        if result.error:
-            status["error"] = result.error
-        info = self.client.publish(self.topic("status"), json.dumps(status), qos=1, retain=True)
-        self._published(info.mid, alarm=False)
-        deadline = time.monotonic() + DELIVERY_WAIT_S
-        while time.monotonic() < deadline:
-            with self._lock:
-                if not self._pending:
-                    break
+    def subscribe(self, topic: str, handler: Callable[[str, bytes], None]) -> None:
+        """Hand every message on ``topic`` to ``handler(topic, payload)`` (paho's thread)."""
+        self._handlers[topic] = handler
+        self.client.subscribe(topic, qos=1)
+
+    def close(self, wait_s: float = DELIVERY_WAIT_S) -> None:
+        """Wait up to ``wait_s`` for the messages still unacknowledged, then disconnect."""
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and self.pending:
             time.sleep(0.05)
-        time.sleep(0.1)  # the status's own acknowledgement
+        time.sleep(0.1)  # the last message's own acknowledgement
         self._closing = True
         self.client.disconnect()
         self.client.loop_stop()
         if self._lost_at is not None:
             self.outages.append(time.monotonic() - self._lost_at)
 
+
+class MqttSink(BaseSink):
+    """Publishes the run to the broker at ``url`` (see the module docstring); ``warn`` hears
+    the broker going away and coming back, with how long it was gone."""
+
+    def __init__(
+        self,
+        url: str,
+        settings: MqttSettings | None = None,
+        warn: Callable[[str], None] | None = None,
+    ) -> None:
+        self.target = MqttTarget.parse(url)
+        self.settings = settings or MqttSettings()
+        self.warn = warn or (lambda message: None)
+        self.connection: MqttConnection | None = None
+        self.alarms_sent = 0
+        self.alarms_acked = 0
+        self.measurements_sent = 0
+        self.dropped = 0
+        self._last_summary = float("-inf")
+
+    def topic(self, leaf: str) -> str:
+        return f"{self.target.prefix}/{leaf}"
+
+    def check(self) -> None:
+        try:
+            import paho.mqtt.client  # noqa: F401
+        except ImportError:
+            raise ThermodepthError(INSTALL) from None
+        read_password(self.settings)
+
+    def open(self, context: RunContext) -> None:
+        client_id = self.settings.client_id or default_client_id()
+        will = json.dumps({"state": "died", "source": context.source.name})
+        self.connection = MqttConnection(
+            self.target, self.settings, self.warn, (self.topic("status"), will), client_id
+        )
+        self.connection.connect()
+        status = {"state": "running", "source": context.source.name, "since_utc": _now()}
+        self.connection.publish(self.topic("status"), json.dumps(status), qos=1, retain=True)
+
+    def _acked(self) -> None:
+        self.alarms_acked += 1  # paho's thread, one at a time
+
+    def frame(self, fused: FusedFrame) -> None:
+        assert self.connection is not None, "open the sink first"
+        for event in fused.events:
+            payload = json.dumps(jsonable(alarm_message(event, fused)))
+            if self.connection.publish(self.topic("alarms"), payload, 1, on_ack=self._acked):
+                self.alarms_sent += 1
+            else:
+                self.dropped += 1
+                self.warn(f"MQTT: {self.settings.max_queued} alarms queued already: one dropped")
+        now = time.monotonic()
+        if now - self._last_summary >= 1.0 / self.settings.measurements_hz:
+            self._last_summary = now
+            payload = json.dumps(jsonable(measurement_message(fused)))
+            self.connection.publish(self.topic("measurements"), payload)
+            self.measurements_sent += 1
+
+    def close(self, result: SessionResult) -> None:
+        if self.connection is None:
+            return
+        status = {"state": "stopped", "stopped": result.stopped, "until_utc": _now()}
+        if result.error:
+            status["error"] = result.error
+        self.connection.publish(self.topic("status"), json.dumps(status), qos=1, retain=True)
+        self.connection.close()
+
     def summary(self) -> str:
-        with self._lock:
-            missing = len(self._pending)
+        missing = self.alarms_sent - self.alarms_acked
+        outages = self.connection.outages if self.connection is not None else []
         away = (
-            f"; the broker was away {len(self.outages)} times, {sum(self.outages):.1f} s in all"
-            if self.outages
+            f"; the broker was away {len(outages)} times, {sum(outages):.1f} s in all"
+            if outages
             else ""
         )
         lost = (
@@ -329,6 +387,11 @@ class MqttSink(BaseSink):
             f"published ({self.alarms_acked} acknowledged{lost}), "
             f"{self.measurements_sent} measurement summaries{away}"
         )
+
+
+def default_client_id() -> str:
+    """A client id no other process has: ``thermodepth-HOST-PID``."""
+    return f"thermodepth-{socket.gethostname()}-{os.getpid()}"
 
 
 def _now() -> str:

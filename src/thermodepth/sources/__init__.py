@@ -180,6 +180,44 @@ def _calibration_unused(spec: str, owner: str, warn: Callable[[str], None] | Non
         warn(f"{spec}: {owner} keeps its own calibration; the one given is not used")
 
 
+def check_spec(spec: str) -> list[tuple[str, str]]:
+    """The ``(kind, arg)`` parts of a spec (:func:`split_spec`), checked as far as can be
+    without opening anything: the kinds and how they combine, a ``sim:`` spec's keys and
+    faults, a path where one is needed, a device's number. One FieldError (``source``)
+    otherwise."""
+    from .sim import parse_faults
+    from .uvc import device_index
+
+    text = spec.strip()
+    parts = split_spec(text)
+    kinds = [k for k, _ in parts]
+    if len(parts) > 1:
+        if len(parts) != 2 or kinds[0] not in DEPTH_CAMERAS or kinds[1] not in THERMAL_CAMERAS:
+            raise FieldError(
+                "source",
+                f"cannot combine {text!r}; expected a depth camera and a thermal camera, "
+                f"DEPTH+THERMAL with DEPTH one of {', '.join(DEPTH_CAMERAS)} and THERMAL one of "
+                f"{', '.join(THERMAL_CAMERAS)}",
+            )
+        if _is_file_arg(parts[0][1]):
+            raise FieldError(
+                "source",
+                f"{text}: a RealSense file cannot be paired with a live thermal camera (the "
+                "file's times are not the live clock); record the file alone, or use "
+                f"realsense[:SERIAL]+{kinds[1]}",
+            )
+    for kind, arg in parts:
+        if kind not in SOURCE_KINDS:
+            raise FieldError("source", f"unknown {text!r}; expected one of {SPEC_HELP}")
+        if kind == "sim":
+            parse_faults(sim_options(arg).get("faults", ""))
+        if kind in ("recording", "folder") and not arg:
+            raise FieldError("source", f"{kind}:PATH needs a path")
+        if kind in THERMAL_CAMERAS and arg:
+            device_index(kind, arg)
+    return parts
+
+
 def open_source(
     spec: str,
     calibration: Calibration | None = None,
@@ -210,7 +248,7 @@ def open_source(
     from .paired import PairedSource, StreamSource
 
     text = spec.strip()
-    parts = split_spec(text)
+    parts = check_spec(text)
     kind, arg = parts[0]
     if thermal_camera is not None and kind != "sim":
         raise FieldError(
@@ -219,22 +257,7 @@ def open_source(
             "itself (realsense+p2pro, ...)",
         )
     if len(parts) > 1:
-        kinds = [k for k, _ in parts]
-        if len(parts) != 2 or kinds[0] not in DEPTH_CAMERAS or kinds[1] not in THERMAL_CAMERAS:
-            raise FieldError(
-                "source",
-                f"cannot combine {text!r}; expected a depth camera and a thermal camera, "
-                f"DEPTH+THERMAL with DEPTH one of {', '.join(DEPTH_CAMERAS)} and THERMAL one of "
-                f"{', '.join(THERMAL_CAMERAS)}",
-            )
         (_, rs_arg), (thermal_kind, thermal_arg) = parts
-        if _is_file_arg(rs_arg):
-            raise FieldError(
-                "source",
-                f"{text}: a RealSense file cannot be paired with a live thermal camera (the "
-                "file's times are not the live clock); record the file alone, or use "
-                f"realsense[:SERIAL]+{thermal_kind}",
-            )
         depth_cam, thermal_cam = _open_both(
             [
                 lambda: _realsense(rs_arg, with_ir, warn, depth_mode),
@@ -268,8 +291,6 @@ def open_source(
             _calibration_unused(text, "the simulated rig", warn)
         return src
     if kind in ("recording", "folder"):
-        if not arg:
-            raise FieldError("source", f"{kind}:PATH needs a path")
         if kind == "folder":
             from .folder import FolderSource
 
@@ -288,10 +309,8 @@ def open_source(
         return _closing_on_error(
             [cam], lambda: StreamSource(cam, "depth", _device_calibration(cam, calibration))
         )
-    if kind in THERMAL_CAMERAS:
-        thermal = _thermal_camera(kind, arg, thermal_latency_s, calibration, warn)
-        return StreamSource(thermal, "thermal", calibration)
-    raise FieldError("source", f"unknown {text!r}; expected one of {SPEC_HELP}")
+    thermal = _thermal_camera(kind, arg, thermal_latency_s, calibration, warn)
+    return StreamSource(thermal, "thermal", calibration)
 
 
 def list_devices() -> dict[str, Any]:
@@ -323,6 +342,7 @@ __all__ = [
     "PairingStats",
     "Source",
     "StreamPairer",
+    "check_spec",
     "event_time_s",
     "list_devices",
     "open_source",

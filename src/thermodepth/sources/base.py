@@ -84,6 +84,12 @@ class Source:
         """What the source skipped so far, by name (e.g. ``thermal_bad_telemetry``)."""
         return {}
 
+    def recover(self) -> str | None:
+        """Try to revive a device that stalled, once the source is closed and before it is
+        opened again (a USB reset of a thermal camera over UVC); a line saying what was done
+        or why it could not be, None when there is nothing to do."""
+        return None
+
     def __enter__(self) -> Source:
         return self
 

@@ -18,8 +18,8 @@ from .pairing import DEFAULT_MAX_SKEW_S, StreamPairer
 
 class Camera(Protocol):
     """A single-stream device: iterate its frames, then close it. Optional attributes the
-    sources use: ``live``, ``settings`` (a mapping), ``counters()``, ``device_depth``,
-    ``path`` (a file played back)."""
+    sources use: ``live``, ``settings`` (a mapping), ``counters()``, ``recover()``,
+    ``device_depth``, ``path`` (a file played back)."""
 
     name: str
 
@@ -34,6 +34,12 @@ _END = object()
 def _camera_counters(camera: Camera) -> dict[str, int]:
     counters = getattr(camera, "counters", None)
     return dict(counters()) if callable(counters) else {}
+
+
+def _recover(*cameras: Camera) -> str | None:
+    """What the cameras that can revive a stalled device did (their ``recover()`` lines)."""
+    done = [line for c in cameras if callable(r := getattr(c, "recover", None)) and (line := r())]
+    return "; ".join(done) or None
 
 
 def _camera_files(camera: Camera) -> tuple[Path, ...]:
@@ -65,6 +71,9 @@ class StreamSource(Source):
 
     def counters(self) -> dict[str, int]:
         return _camera_counters(self.camera)
+
+    def recover(self) -> str | None:
+        return _recover(self.camera)
 
 
 class PairedSource(Source):
@@ -187,6 +196,9 @@ class PairedSource(Source):
 
     def counters(self) -> dict[str, int]:
         return {**_camera_counters(self.depth_camera), **_camera_counters(self.thermal_camera)}
+
+    def recover(self) -> str | None:
+        return _recover(self.depth_camera, self.thermal_camera)
 
 
 __all__ = ["Camera", "DeviceLostError", "PairedSource", "StreamSource"]

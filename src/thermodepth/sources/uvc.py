@@ -15,6 +15,9 @@ video*`` capture node with its name and USB vendor:product, which tell the camer
 
 from __future__ import annotations
 
+import errno
+import fcntl
+import os
 import re
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -30,6 +33,9 @@ from ..errors import InputError
 from .base import DeviceGuard, DeviceLostError
 
 SYSFS_VIDEO = Path("/sys/class/video4linux")
+DEV_USB = Path("/dev/bus/usb")
+USBDEVFS_RESET = 0x5514
+"""``_IO('U', 20)`` of linux/usbdevice_fs.h: reset a USB device as if re-plugged."""
 
 CAMERA_USB_IDS: dict[str, set[tuple[str, str]]] = {
     "lepton": {("1e4e", "0100")},  # GroupGets PureThermal 1/2/mini
@@ -243,6 +249,42 @@ class UvcCapture:
         self._guard.close()
 
 
+def usb_device_node(index: int, sysfs: Path = SYSFS_VIDEO, devfs: Path = DEV_USB) -> Path | None:
+    """The usbfs node (``/dev/bus/usb/BBB/DDD``) of the USB device /dev/videoN belongs to
+    (its ``busnum`` and ``devnum`` in sysfs, above the video interface), or None."""
+    device = sysfs / f"video{index}" / "device"
+    for parent in (device, device / "..", device / "../.."):
+        bus, dev = _read(parent / "busnum"), _read(parent / "devnum")
+        if bus.isdigit() and dev.isdigit():
+            return devfs / f"{int(bus):03d}" / f"{int(dev):03d}"
+    return None
+
+
+def usb_reset(index: int, name: str, sysfs: Path = SYSFS_VIDEO, devfs: Path = DEV_USB) -> str:
+    """Reset the USB device of /dev/videoN (``USBDEVFS_RESET``), as a PureThermal board whose
+    stream stopped needs; a line saying it was done, or why it could not be (no such
+    device, or this process may not write its node: root, or a udev rule granting it)."""
+    node = usb_device_node(index, sysfs, devfs)
+    if node is None:
+        return f"{name}: no USB reset: /dev/video{index} is not a USB device here"
+    try:
+        fd = os.open(node, os.O_WRONLY)
+    except OSError as exc:
+        why = (
+            "this process may not write it (run as root, or grant it with a udev rule)"
+            if exc.errno in (errno.EACCES, errno.EPERM)
+            else exc.strerror or str(exc)
+        )
+        return f"{name}: no USB reset of {node}: {why}"
+    try:
+        fcntl.ioctl(fd, USBDEVFS_RESET, 0)
+    except OSError as exc:
+        return f"{name}: USB reset of {node} failed ({exc.strerror or exc})"
+    finally:
+        os.close(fd)
+    return f"{name}: USB reset of {node}"
+
+
 def frozen(image: NDArray[Any], previous: NDArray[Any] | None) -> bool:
     """True when ``image`` repeats ``previous`` exactly: a camera that holds its last image
     while its shutter is closed (FFC; an InfiRay P2 Pro, a Boson) does so, where a live
@@ -273,6 +315,7 @@ class UvcCamera:
             index = device_index(self.kind, "", sysfs)
         self.index = index
         self.name = f"{self.kind}:{index}"
+        self.sysfs = sysfs
         self.live = True
         self.warn = warn or (lambda line: None)
         self.capture = UvcCapture(index, self.name, fourcc, size, timeout_s, latency_s)
@@ -281,6 +324,10 @@ class UvcCamera:
         """Stop reading; the device is released now, or by the reading thread as soon as its
         read returns (never under a read)."""
         self.capture.close()
+
+    def recover(self) -> str:
+        """A USB reset of the camera (:func:`usb_reset`)."""
+        return usb_reset(self.index, self.name, self.sysfs)
 
 
 def opened_channel(opened: Any, kind: type, warn: Callable[[str], None], why: str) -> Any:
