@@ -7,7 +7,7 @@ import itertools
 import re
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -17,7 +17,14 @@ import pytest
 
 from test_telemetry import telemetry_bytes, words_of
 from thermodepth.errors import FieldError, InputError, ThermodepthError
-from thermodepth.frames import DepthFrame, FfcState, Telemetry, ThermalFrame, thermal_output
+from thermodepth.frames import (
+    DepthFrame,
+    FfcState,
+    FramePair,
+    Telemetry,
+    ThermalFrame,
+    thermal_output,
+)
 from thermodepth.io.recording import Recording
 from thermodepth.radiometry import ThermalOutput
 from thermodepth.session import record_session
@@ -29,6 +36,7 @@ from thermodepth.sources.base import DeviceLostError
 from thermodepth.sources.lepton import LeptonCamera
 from thermodepth.sources.paired import PairedSource
 from thermodepth.sources.realsense import RealSenseCamera
+from thermodepth.sources.sim import sim_device
 from thermodepth.sources.uvc import device_index, list_purethermal, list_video_devices
 
 TEL = Telemetry(frame_counter=0, fpa_temp_k=305.0, housing_temp_k=304.0)
@@ -340,48 +348,57 @@ def test_sim_spec_says_once_that_a_given_calibration_is_not_used() -> None:
     src.close()
 
 
+def device_times(spec: str, pairs: Iterable[FramePair]) -> list[float]:
+    """The pairs' thermal times as seconds of the simulated device's own time (a paced
+    simulator stamps them in Unix time, as a live camera does)."""
+    t0 = sim_device(spec).t0_unix
+    return [p.thermal_time_s - t0 for p in pairs]
+
+
 def test_sim_unplug_loses_the_device_until_its_time_is_up() -> None:
     spec = "sim:pace=real,faults=unplug@0.3s+0.4s"
     src = open_source(spec)
-    times = []
+    pairs: list[FramePair] = []
     with pytest.raises(DeviceLostError, match=r"sim: unplugged at 0.3 s \(for 0.4 s\)"):
-        for pair in src:
-            times.append(pair.thermal_time_s)
+        pairs.extend(src)
+    times = device_times(spec, pairs)
     assert times and max(times) < 0.3
+    assert abs(pairs[-1].thermal_time_s - time.time()) < 0.2  # Unix time, as live cameras
     with pytest.raises(InputError, match="no simulated device"):
         open_source(spec)  # still unplugged: the device's time goes on across openings
     time.sleep(0.45)
-    again = open_source(spec, frames=2)
-    assert [p.thermal_time_s >= 0.7 for p in again] == [True, True]
+    again = device_times(spec, open_source(spec, frames=2))
+    assert [t >= 0.7 for t in again] == [True, True]
 
 
 def test_sim_stall_sends_nothing_until_closed_then_goes_on() -> None:
-    src = open_source("sim:pace=real,faults=stall@0.2s")
-    got: list[float] = []
-    reader = threading.Thread(target=lambda: got.extend(p.thermal_time_s for p in src))
+    spec = "sim:pace=real,faults=stall@0.2s"
+    src = open_source(spec)
+    got: list[FramePair] = []
+    reader = threading.Thread(target=lambda: got.extend(src))
     reader.start()
     time.sleep(0.6)
-    assert reader.is_alive() and got and max(got) < 0.2  # stalled, not ended
+    assert reader.is_alive() and got and max(device_times(spec, got)) < 0.2  # stalled
     src.close()
     reader.join(1.0)
     assert not reader.is_alive()  # close() unblocks a stalled camera
-    assert len(list(open_source("sim:pace=real,faults=stall@0.2s", frames=3))) == 3  # once
+    assert len(list(open_source(spec, frames=3))) == 3  # it stalls once
 
 
 def test_sim_corrupt_ffc_storm_and_vox_ramp_change_the_frames() -> None:
-    src = open_source("sim:pace=real,faults=corrupt@0.25s+0.25s;ffc-storm@0s+0.2s,vox-ramp@0s")
+    spec = "sim:pace=real,faults=corrupt@0.25s+0.25s;ffc-storm@0s+0.2s,vox-ramp@0s"
+    src = open_source(spec)
     pairs = list(itertools.islice(src, 6))
     src.close()
-    clean = [p for p in pairs if not 0.25 <= p.thermal_time_s < 0.5]
-    bad = [p for p in pairs if 0.25 <= p.thermal_time_s < 0.5]
+    times = device_times(spec, pairs)
+    clean = [p for p, t in zip(pairs, times, strict=True) if not 0.25 <= t < 0.5]
+    bad = [p for p, t in zip(pairs, times, strict=True) if 0.25 <= t < 0.5]
     assert bad and clean
     assert all(p.thermal.std() > 10 * c.thermal.std() for p in bad for c in clean)
-    storm = [p.telemetry.ffc_state for p in pairs if p.thermal_time_s < 0.18]
+    storm = [p.telemetry.ffc_state for p, t in zip(pairs, times, strict=True) if t < 0.18]
     assert storm and set(storm) == {FfcState.IN_PROGRESS}
     fpa = [p.telemetry.fpa_temp_k for p in pairs]
-    assert fpa[-1] - fpa[0] == pytest.approx(
-        pairs[-1].thermal_time_s - pairs[0].thermal_time_s, rel=0.05
-    )  # 1 K/s
+    assert fpa[-1] - fpa[0] == pytest.approx(times[-1] - times[0], rel=0.05)  # 1 K/s
 
 
 # -- the Lepton over UVC ----------------------------------------------------------------------

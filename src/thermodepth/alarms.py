@@ -13,8 +13,8 @@ raise the rule (an on-delay: frame rates differ per camera). It clears once the 
 past ``clear_below_c`` (``clear_above_c`` for a ``below_c`` rule; hysteresis, default the limit
 itself) for ``clear_for_s`` seconds. A ``latch`` rule stays raised after that until someone
 acknowledges it (:meth:`AlarmTracker.acknowledge`, who and when kept; it may come from another
-thread than the frames'). Any raised rule may be acknowledged. A rule of level ``alarm`` raised while a ``warning`` rule on the same subject is
-raised is an escalation.
+thread than the frames'). Any raised rule may be acknowledged. A rule of level ``alarm``
+raised while a ``warning`` rule on the same subject is raised is an escalation.
 
 Every change of state is an event, a plain dict ready for JSON lines: ``event`` ``alarm``
 (raised), ``escalated``, ``acknowledged`` or ``clear``, with the rule, its level, the

@@ -240,6 +240,12 @@ class ViewerSettings(StrictSchema):
             raise ValueError(f"temp_range_c {[lo, hi]}: expected low < high (C)")
         return self
 
+    @property
+    def fixed_range_c(self) -> tuple[float, float] | None:
+        """The colour scale (C) when the settings give one (None: each run finds its own
+        from its first frame with temperatures)."""
+        return self.temp_range_c if "temp_range_c" in self.model_fields_set else None
+
 
 class MqttSettings(StrictSchema):
     """Publishing to an MQTT broker (``run --mqtt URL``; docs/pipeline.md): a measurement

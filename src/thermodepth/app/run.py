@@ -149,19 +149,13 @@ SINK_BUILDERS: list[SinkBuilder] = [
     lambda o, s, w: MqttSink(o.mqtt, s.mqtt, w) if o.mqtt is not None else None,
     lambda o, s, w: viewer_sink(o.viewer, o.viewer_save, o.viewer_connect, s.viewer, w),
     lambda o, s, w: (
-        SnapshotSink(o.out_dir, o.snapshots, display_range(s))
+        SnapshotSink(o.out_dir, o.snapshots, s.viewer.fixed_range_c)
         if o.snapshots is not None and o.out_dir is not None
         else None
     ),
 ]
 """The sinks a run's options ask for, one builder each (None: not asked for), from the
 options, the settings and where warnings go."""
-
-
-def display_range(settings: Settings) -> tuple[float, float] | None:
-    """The colour scale the settings fix (``viewer.temp_range_c``, C), None if they do not."""
-    given = "temp_range_c" in settings.viewer.model_fields_set
-    return settings.viewer.temp_range_c if given else None
 
 
 def provenance(settings_path: Path | None, settings: Settings) -> dict[str, Any]:

@@ -1,4 +1,5 @@
-"""``devices``, ``record`` and ``run``: cameras, recordings and the live measuring run."""
+"""``devices``, ``record``, ``run``, ``view`` and ``monitor``: cameras, recordings, the live
+measuring run and the always-on monitor."""
 
 from __future__ import annotations
 
@@ -305,3 +306,26 @@ def print_frame(fused: FusedFrame) -> None:
     for e in fused.events:
         style = "bold red" if e["event"] in ("alarm", "escalated") else "green"
         console.print(f"[{style}]{escape(event_line(e))}[/{style}]")
+
+
+@app.command("monitor")
+@one_line_errors
+def monitor_cmd(
+    config: Annotated[Path, typer.Argument(help="The monitor's config (monitor.yaml).")],
+    check: Annotated[
+        bool, typer.Option("--check", help="Only check the config and say what it sets up.")
+    ] = False,
+) -> None:
+    """Watch rigs day and night (docs/monitor.md): each rig reopened when its camera fails,
+    sensor faults raised when data cannot be trusted, every event kept with its evidence
+    (a clip, an overlay, a point cloud), storage bounded, health on HTTP and MQTT. Runs until
+    SIGTERM or Ctrl-C; SIGHUP reloads the config."""
+    from ..app.monitor import describe_config, run_monitor
+    from ..monitor import load_config
+
+    if check:
+        for line in describe_config(load_config(config)):
+            console.print(line, markup=False, highlight=False, soft_wrap=True)
+        console.print(f"{config}: OK", markup=False, highlight=False)
+        return
+    run_monitor(config)

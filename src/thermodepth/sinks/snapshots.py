@@ -14,6 +14,17 @@ from ..pipeline import FusedFrame
 from .base import BaseSink
 
 
+def write_snapshot(
+    fused: FusedFrame, png: Path, ply: Path, title: str, range_c: tuple[float, float]
+) -> None:
+    """The overlay PNG and the PLY point cloud of a fused frame, coloured on ``range_c``
+    (C)."""
+    lo, hi = range_c
+    plot_overlay(fused, png, title, lo, hi)
+    points, temps = fused.points()
+    write_ply(ply, points, temps, lo, hi)
+
+
 class SnapshotSink(BaseSink):
     """Writes the snapshots of a run into ``out_dir/snapshots`` (see the module docstring);
     ``range_c``: the colour scale (C), None: from the first frame with temperatures."""
@@ -35,15 +46,11 @@ class SnapshotSink(BaseSink):
             return
         if self.range_c is None:
             self.range_c = display_range_c(fused.temp_depth_c)
-        lo, hi = self.range_c
-        stem = self.folder / f"frame_{fused.index:06d}"
         rule = ", ".join(alarms)
         title = f"frame {fused.index}, t {fused.thermal_time_s:.2f} s, VOx {fused.vox_label}"
-        plot_overlay(
-            fused, stem.with_suffix(".png"), title + (f": ALARM {rule}" if rule else ""), lo, hi
-        )
-        points, temps = fused.points()
-        write_ply(stem.with_suffix(".ply"), points, temps, lo, hi)
+        title += f": ALARM {rule}" if rule else ""
+        png = self.folder / f"frame_{fused.index:06d}.png"
+        write_snapshot(fused, png, png.with_suffix(".ply"), title, self.range_c)
         self.written += 1
         self.at_alarms += bool(alarms)
 

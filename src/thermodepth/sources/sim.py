@@ -1,7 +1,8 @@
 """The simulated rig as a source (``sim``): FramePairs from :class:`thermodepth.sim.Rig`.
 
-As fast as it can render by default; in real time when paced (``sim:pace=real``), as a live
-rig is, and then it can misbehave when told (``sim:faults=...``), as the monitor's tests need:
+As fast as it can render by default (times from 0 s); in real time when paced
+(``sim:pace=real``), as a live rig is, its frames stamped in Unix time as a live camera's are,
+and then it can misbehave when told (``sim:faults=...``), as the monitor's tests need:
 
 =======================  ======================================================================
 fault                    what the simulated camera does
@@ -78,10 +79,11 @@ def parse_faults(text: str) -> tuple[Fault, ...]:
 
 @dataclass
 class SimDevice:
-    """A simulated device's state across openings: when it was first opened (monotonic s)
-    and the stalls it has gone through."""
+    """A simulated device's state across openings: when it was first opened (monotonic and
+    Unix s) and the stalls it has gone through."""
 
     t0: float = field(default_factory=time.monotonic)
+    t0_unix: float = field(default_factory=time.time)
     stalled: set[float] = field(default_factory=set)
 
     def now_s(self) -> float:
@@ -157,6 +159,12 @@ class SimSource(Source):
                 if self._closed.wait(max(0.0, pair.thermal_time_s - self.device.now_s())):
                     return
                 pair = self._misbehave(pair)
+                unix = self.device.t0_unix
+                pair = replace(
+                    pair,
+                    depth_time_s=pair.depth_time_s + unix,
+                    thermal_time_s=pair.thermal_time_s + unix,
+                )
             elif self._closed.is_set():
                 return
             yield match_of(pair)

@@ -1,0 +1,257 @@
+"""The monitor's configuration file (``monitor.yaml``): its schema, and loading it with every
+problem on a line of its own (docs/monitor.md describes it key by key).
+
+Paths in the file (a rig's settings, the storage folder, the token and password files) are
+relative to the file's folder.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import re
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, ValidationError, field_validator
+
+from ..errors import FieldError, InputError, ThermodepthError, repeated
+from ..pipeline import MqttSettings, Settings
+from ..schema import StrictSchema, read_mapping, validation_lines
+from ..sinks.mqtt import MqttTarget, read_password
+from ..sources import check_spec
+
+RIG_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+MONITOR = "monitor"
+"""The name the monitor's own events (storage faults) go under, where a rig's name would."""
+PACES = ("recorded", "fast")
+DEFAULT_LISTEN = "127.0.0.1:8088"
+
+
+class RigConfig(StrictSchema):
+    """One rig: ``name`` (letters, digits, ``_.-``: it names topics and folders),
+    ``source`` (any source spec), ``settings`` (the run settings file), ``location`` (free
+    text), ``pace`` (a recording's: ``recorded``, at its recorded pace and again from its
+    start when it ends, as a live camera stands in; ``fast``: once, as fast as it goes),
+    ``stall_s`` (no new frame for so long is a stall), ``depth_mode``, ``max_skew_s``,
+    ``thermal_latency_s`` (as ``run`` takes them)."""
+
+    name: str
+    source: str
+    settings: Path | None = None
+    location: str | None = None
+    pace: Literal["recorded", "fast"] | None = None
+    stall_s: float = Field(default=3.0, gt=0)
+    depth_mode: str | None = None
+    max_skew_s: float = Field(default=0.05, ge=0)
+    thermal_latency_s: float = Field(default=0.0, ge=0)
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, name: str) -> str:
+        if not RIG_NAME.match(name):
+            raise ValueError("use letters, digits and _.- only (it names topics and folders)")
+        if name == MONITOR:
+            raise ValueError(f"{MONITOR!r} names the monitor's own events: choose another")
+        return name
+
+
+class StorageConfig(StrictSchema):
+    """Where evidence goes and how much is kept: ``path``; ``retention_days`` (older
+    recordings and clips are deleted); ``min_free_gb`` (below it the oldest go first);
+    ``continuous`` (also keep a rolling recording of everything, in ``segment_s`` pieces);
+    ``pre_s`` / ``post_s`` (a clip's seconds before and after its event; a later event
+    extends the clip up to ``clip_max_s`` long, then starts a new one); ``pre_max_mb`` (each
+    rig's pre-trigger buffer in memory, compressed, at most)."""
+
+    path: Path
+    retention_days: float = Field(default=30.0, gt=0)
+    min_free_gb: float = Field(default=1.0, ge=0)
+    continuous: bool = False
+    segment_s: float = Field(default=600.0, gt=0)
+    pre_s: float = Field(default=10.0, ge=0)
+    post_s: float = Field(default=10.0, ge=0)
+    clip_max_s: float = Field(default=120.0, gt=0)
+    pre_max_mb: float = Field(default=128.0, gt=0)
+
+
+class HttpConfig(StrictSchema):
+    """The health and API server: ``listen`` (``HOST:PORT``, port 0: any free one; null:
+    none), ``token_file`` (its first line is the bearer token every request but
+    ``/healthz`` must carry; needed to listen beyond this machine)."""
+
+    listen: str | None = DEFAULT_LISTEN
+    token_file: Path | None = None
+
+    def address(self) -> tuple[str, int]:
+        """(host, port) of ``listen``; ValueError if it is not ``HOST:PORT``."""
+        assert self.listen is not None
+        host, sep, port = self.listen.rpartition(":")
+        if not sep or not host or not port.isdigit() or not 0 <= int(port) < 65536:
+            raise ValueError(f"listen: {self.listen!r}: expected HOST:PORT (127.0.0.1:8088)")
+        return host.strip("[]"), int(port)
+
+    def loopback(self) -> bool:
+        host = self.address()[0]
+        if host == "localhost":
+            return True
+        try:
+            return ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            return False
+
+
+class MqttConfig(MqttSettings):
+    """The broker: ``url`` (``mqtt://[USER@]HOST[:PORT]/PREFIX``, as ``run --mqtt`` takes
+    it; each rig publishes under ``PREFIX/RIG/``) and the settings' ``mqtt`` keys."""
+
+    url: str
+
+
+class FailsafeConfig(StrictSchema):
+    """When a rig's data cannot be trusted (a ``sensor_fault``): ``vox_margin_c`` beyond the
+    VOx range its compensation was fitted on; the shutter closed ``shutter_max_s`` on end, or
+    more than ``shutter_max_share`` of the last ``shutter_window_s``; corrupt frames for
+    ``corrupt_s``; ``ffc_grace_s`` more before a rig whose shutter is closing counts as
+    stalled, ``startup_s`` for a rig's first frame (a camera takes a while to start); a
+    fault clears once good for ``clear_s``."""
+
+    vox_margin_c: float = Field(default=2.0, ge=0)
+    shutter_max_s: float = Field(default=10.0, gt=0)
+    shutter_max_share: float = Field(default=0.5, gt=0, le=1)
+    shutter_window_s: float = Field(default=30.0, gt=0)
+    corrupt_s: float = Field(default=1.0, ge=0)
+    ffc_grace_s: float = Field(default=2.0, ge=0)
+    startup_s: float = Field(default=10.0, ge=0)
+    clear_s: float = Field(default=2.0, ge=0)
+
+
+class MonitorConfig(StrictSchema):
+    """The whole file (module docstring)."""
+
+    rigs: list[RigConfig] = Field(min_length=1)
+    storage: StorageConfig
+    http: HttpConfig = HttpConfig()
+    mqtt: MqttConfig | None = None
+    failsafe: FailsafeConfig = FailsafeConfig()
+
+
+def _relative(base: Path, path: Path | None) -> Path | None:
+    return None if path is None else base / path
+
+
+def _source_in(base: Path, spec: str) -> str:
+    """A ``recording:`` or ``folder:`` spec with its path taken relative to ``base``."""
+    kind, arg = spec.strip().partition(":")[::2]
+    if kind in ("recording", "folder") and arg and not Path(arg).is_absolute():
+        return f"{kind}:{base / arg}"
+    return spec
+
+
+def _resolved(config: MonitorConfig, base: Path) -> MonitorConfig:
+    """Every path in ``config`` taken relative to ``base`` (the file's folder)."""
+    rigs = [
+        r.model_copy(
+            update={"settings": _relative(base, r.settings), "source": _source_in(base, r.source)}
+        )
+        for r in config.rigs
+    ]
+    update: dict[str, object] = {
+        "rigs": rigs,
+        "storage": config.storage.model_copy(update={"path": base / config.storage.path}),
+        "http": config.http.model_copy(
+            update={"token_file": _relative(base, config.http.token_file)}
+        ),
+    }
+    if config.mqtt is not None:
+        update["mqtt"] = config.mqtt.model_copy(
+            update={
+                "password_file": _relative(base, config.mqtt.password_file),
+                "ca_file": _relative(base, config.mqtt.ca_file),
+            }
+        )
+    return config.model_copy(update=update)
+
+
+def _rig_problems(i: int, rig: RigConfig) -> list[str]:
+    """What is wrong with a rig beyond its schema: its source spec, its settings file."""
+    problems = []
+    where = f"rigs.{i} ({rig.name})"
+    try:
+        kind, arg = check_spec(rig.source)[0]
+        if rig.pace is not None and kind != "recording":
+            problems.append(f"{where}.pace: only a recording: source has a pace to choose")
+        if kind in ("recording", "folder") and not Path(arg).exists():
+            problems.append(f"{where}.source: {arg}: no such {kind}")
+    except FieldError as exc:
+        problems.append(f"{where}.source: {exc.message}")
+    except ThermodepthError as exc:
+        problems.append(f"{where}.source: {exc}")
+    if rig.settings is not None:
+        try:
+            Settings.load(rig.settings)
+        except ThermodepthError as exc:
+            problems.append(f"{where}.settings: {exc}")
+    return problems
+
+
+def config_problems(config: MonitorConfig) -> list[str]:
+    """Every problem of a valid-looking config, one line each: rig names twice, sources,
+    settings files, the listen address, a token where one is needed, the broker's URL and
+    password."""
+    problems = []
+    twice = repeated(r.name for r in config.rigs)
+    if twice:
+        problems.append(f"rigs: names must differ: {', '.join(map(repr, twice))} twice")
+    for i, rig in enumerate(config.rigs):
+        problems.extend(_rig_problems(i, rig))
+    http = config.http
+    if http.listen is not None:
+        try:
+            if not http.loopback() and http.token_file is None:
+                problems.append(
+                    f"http.listen: {http.listen} is reachable from other machines: give "
+                    "http.token_file (a bearer token), or listen on 127.0.0.1"
+                )
+        except ValueError as exc:
+            problems.append(f"http.{exc}")
+    if http.token_file is not None:
+        try:
+            read_token(http.token_file)
+        except InputError as exc:
+            problems.append(f"http.token_file: {exc}")
+    if config.mqtt is not None:
+        try:
+            MqttTarget.parse(config.mqtt.url)
+        except FieldError as exc:
+            problems.append(f"mqtt.url: {exc.message}")
+        try:
+            read_password(config.mqtt)
+        except InputError as exc:
+            problems.append(f"mqtt.password_file: {exc}")
+    return problems
+
+
+def read_token(path: Path) -> str:
+    """The bearer token: the file's first line (InputError if unreadable or empty)."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if not lines or not lines[0].strip():
+        raise InputError(f"{path}: empty (the first line is the token)")
+    return lines[0].strip()
+
+
+def load_config(path: str | Path) -> MonitorConfig:
+    """Read and check a monitor config; one InputError whose lines each name the file and one
+    problem."""
+    p = Path(path)
+    data = read_mapping(p)
+    try:
+        config = _resolved(MonitorConfig.model_validate(data), p.parent)
+    except ValidationError as exc:
+        raise InputError("\n".join(f"{p}: {line}" for line in validation_lines(exc))) from None
+    problems = config_problems(config)
+    if problems:
+        raise InputError("\n".join(f"{p}: {line}" for line in problems))
+    return config

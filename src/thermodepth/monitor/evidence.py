@@ -1,0 +1,340 @@
+"""The evidence of an event: a clip of the raw pairs from ``pre_s`` before it to ``post_s``
+after, as an ordinary recording (``run --source recording:`` and ``view`` replay it), and the
+overlay PNG and PLY point cloud of the frame that raised it, in
+``STORAGE/clips/RIG/YYYYmmddTHHMMSSZ-RULE/`` (``clip.zarr``, ``overlay.png``, ``frame.ply``).
+
+The seconds before an event come from each rig's pre-trigger buffer (:class:`PreTrigger`):
+its last pairs compressed in memory (Blosc LZ4), bounded by seconds and by bytes. An event
+while a rig's clip is still being recorded extends that clip (one clip, both events) up to
+``clip_max_s`` long; past that the clip ends and a new one begins. Each
+clip is written on its own thread and the pictures on one shared thread, so that a slow disk
+or a slow plot never holds up a rig; what cannot be kept (a full disk, a full queue) is told
+through ``on_fault``.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numcodecs import Blosc
+
+from ..frames import DepthFrame, FramePair, Match, Telemetry, ThermalFrame
+from ..io.recording import RecordingWriter
+from ..pipeline import FusedFrame
+from ..sinks.base import RunContext
+from ..sinks.snapshots import write_snapshot
+from .storage import fresh_path, stamp
+
+_CODEC = Blosc("lz4", 5, Blosc.SHUFFLE)
+Packed = tuple[bytes, tuple[int, ...], str]
+_END = object()
+PICTURES_WAITING = 32
+"""Overlays and point clouds waiting to be drawn, at most (each takes about a second)."""
+
+
+def _pack(a: np.ndarray | None) -> Packed | None:
+    if a is None:
+        return None
+    a = np.ascontiguousarray(a)
+    return _CODEC.encode(a), a.shape, a.dtype.str
+
+
+def _unpack(p: Packed | None) -> Any:
+    if p is None:
+        return None
+    data, shape, dtype = p
+    return np.frombuffer(_CODEC.decode(data), dtype=dtype).reshape(shape)
+
+
+@dataclass(frozen=True)
+class PackedMatch:
+    """A Match with its images compressed (:meth:`unpack` gives it back, bit for bit)."""
+
+    depth: Packed
+    thermal: Packed
+    ir: Packed | None
+    preview: Packed | None
+    depth_time_s: float
+    depth_index: int
+    thermal_time_s: float
+    thermal_index: int
+    telemetry: Telemetry
+    index: int
+
+    @classmethod
+    def of(cls, m: Match) -> PackedMatch:
+        depth, thermal = _pack(m.depth.depth), _pack(m.thermal.counts)
+        assert depth is not None and thermal is not None
+        return cls(
+            depth,
+            thermal,
+            _pack(m.depth.ir),
+            _pack(m.thermal.preview),
+            m.depth.time_s,
+            m.depth.index,
+            m.thermal.time_s,
+            m.thermal.index,
+            m.thermal.telemetry,
+            m.pair.index,
+        )
+
+    @property
+    def nbytes(self) -> int:
+        return sum(len(p[0]) for p in (self.depth, self.thermal, self.ir, self.preview) if p)
+
+    def unpack(self) -> Match:
+        depth, thermal = _unpack(self.depth), _unpack(self.thermal)
+        ir, preview = _unpack(self.ir), _unpack(self.preview)
+        d = DepthFrame(depth, self.depth_time_s, self.depth_index, ir)
+        t = ThermalFrame(thermal, self.thermal_time_s, self.thermal_index, self.telemetry, preview)
+        pair = FramePair(
+            depth,
+            thermal,
+            self.depth_time_s,
+            self.thermal_time_s,
+            self.telemetry,
+            self.index,
+            ir,
+            preview,
+        )
+        return Match(d, t, pair)
+
+
+class PreTrigger:
+    """A rig's last ``keep_s`` seconds of pairs (by their thermal time), compressed, at most
+    ``max_bytes``; the oldest go first (``evicted`` counts those that went for the bytes)."""
+
+    def __init__(self, keep_s: float, max_bytes: int) -> None:
+        self.keep_s, self.max_bytes = keep_s, max_bytes
+        self.items: deque[PackedMatch] = deque()
+        self.nbytes = 0
+        self.evicted = 0
+        self._lock = threading.Lock()
+
+    def add(self, match: Match) -> None:
+        if self.keep_s <= 0:
+            return
+        packed = PackedMatch.of(match)
+        with self._lock:
+            self.items.append(packed)
+            self.nbytes += packed.nbytes
+            newest = packed.thermal_time_s
+            while self.items and (
+                newest - self.items[0].thermal_time_s > self.keep_s or self.nbytes > self.max_bytes
+            ):
+                old = self.items.popleft()
+                self.nbytes -= old.nbytes
+                self.evicted += newest - old.thermal_time_s <= self.keep_s
+
+    def snapshot(self) -> list[PackedMatch]:
+        with self._lock:
+            return list(self.items)
+
+
+class Clip:
+    """One clip being written: the pairs before its event, then every pair until ``until_s``
+    (thermal time, s), on its own thread into ``folder/clip.zarr``. ``on_fault`` hears what
+    could not be kept."""
+
+    def __init__(
+        self,
+        clip_id: str,
+        folder: Path,
+        context: RunContext,
+        before: list[PackedMatch],
+        until_s: float,
+        on_fault: Callable[[str], None],
+        max_queue: int = 256,
+    ) -> None:
+        self.id, self.folder, self.until_s = clip_id, folder, until_s
+        self.started_s = before[0].thermal_time_s if before else until_s
+        self.on_fault = on_fault
+        self.events: list[dict[str, Any]] = []
+        self.written = 0
+        self.lost = 0
+        self.max_queue = max_queue
+        self._queue: queue.Queue[Any] = queue.Queue()
+        for packed in before:
+            self._queue.put(packed)
+        self._failed = False
+        self._thread = threading.Thread(
+            target=self._write, args=(context,), name=f"clip {clip_id}", daemon=True
+        )
+        self._thread.start()
+
+    def add(self, match: Match) -> bool:
+        """Queue a pair; False once the clip's time is over (the pair is not taken)."""
+        if match.pair.thermal_time_s > self.until_s:
+            return False
+        if self._queue.qsize() >= self.max_queue:  # the disk cannot keep up: say so, go on
+            self.lost += 1
+        else:
+            self._queue.put(match)
+        return True
+
+    def _write(self, context: RunContext) -> None:
+        source = context.source
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            writer = RecordingWriter(
+                self.folder / "clip.zarr",
+                source.calibration or context.calibration,
+                {**source.settings(), **context.provenance},
+                source=source.name,
+                device_depth=source.device_depth,
+                depth_frames="paired",
+            )
+        except Exception as exc:
+            self._fail(f"clip {self.id} not kept: {exc}")
+            return
+        try:
+            while (item := self._queue.get()) is not _END:
+                if not self._failed:
+                    writer.add_match(item.unpack() if isinstance(item, PackedMatch) else item)
+                    self.written += 1
+            writer.close({"stopped": "clip", "events": self.events, "frames_not_kept": self.lost})
+        except Exception as exc:
+            self._fail(f"clip {self.id} kept only its first {self.written} pairs: {exc}")
+            while self._queue.get() is not _END:
+                pass
+
+    def _fail(self, line: str) -> None:
+        self._failed = True
+        self.on_fault(line)
+
+    def finish(self) -> None:
+        """No more pairs: the clip is closed once its queue is written."""
+        self._queue.put(_END)
+
+    def join(self, timeout_s: float | None = None) -> None:
+        self._thread.join(timeout_s)
+
+
+class Evidence:
+    """The clips and pictures of a monitor's events under ``root`` (module docstring).
+    pre_s, post_s: a clip's seconds before and after its event; max_s: how long a clip that
+    events extend may grow; on_fault: told, in one line, what could not be written;
+    ``pictures_skipped`` counts the overlays not drawn because too many were waiting (each
+    said through ``log``)."""
+
+    def __init__(
+        self,
+        root: Path,
+        pre_s: float,
+        post_s: float,
+        max_s: float,
+        on_fault: Callable[[str], None],
+        log: Callable[[str], None],
+    ) -> None:
+        self.root, self.pre_s, self.post_s, self.max_s = root, pre_s, post_s, max_s
+        self.on_fault, self.log = on_fault, log
+        self.pictures_skipped = 0
+        self.open: dict[str, Clip] = {}
+        self.finished: list[Clip] = []
+        self._lock = threading.Lock()
+        self._pictures: queue.Queue[Any] = queue.Queue(PICTURES_WAITING)
+        self._painter = threading.Thread(target=self._paint, name="evidence pictures", daemon=True)
+        self._painter.start()
+
+    def active_folders(self) -> set[Path]:
+        """The folders of clips still being written (never deleted by the storage rule)."""
+        with self._lock:
+            self.finished = [c for c in self.finished if c._thread.is_alive()]
+            return {c.folder for c in (*self.open.values(), *self.finished)}
+
+    def trigger(
+        self,
+        rig: str,
+        event: dict[str, Any],
+        fused: FusedFrame,
+        context: RunContext,
+        before: PreTrigger,
+        range_c: tuple[float, float] | None,
+    ) -> str:
+        """The clip of a raising event (a new one, or the rig's open clip extended); its
+        pictures are queued. Returns the clip's id (``RIG/STAMP-RULE``)."""
+        now_s = fused.thermal_time_s
+        _ = fused.on_depth  # sampled on the rig's thread: the registration is not shared
+        with self._lock:
+            clip = self.open.get(rig)
+            if clip is not None and now_s + self.post_s - clip.started_s > self.max_s:
+                self._end(rig)  # long enough: it ends here, a new one begins
+                clip = None
+            if clip is None:
+                folder = fresh_path(self.root / rig, f"{stamp(time.time())}-{event['rule']}")
+                first = [p for p in before.snapshot() if p.thermal_time_s >= now_s - self.pre_s]
+                clip = Clip(
+                    f"{rig}/{folder.name}",
+                    folder,
+                    context,
+                    first,
+                    now_s + self.post_s,
+                    self.on_fault,
+                )
+                self.open[rig] = clip
+                self._picture(fused, clip, event, range_c)
+            clip.until_s = max(clip.until_s, now_s + self.post_s)
+            clip.events.append(event)
+            return clip.id
+
+    def _picture(
+        self,
+        fused: FusedFrame,
+        clip: Clip,
+        event: dict[str, Any],
+        range_c: tuple[float, float] | None,
+    ) -> None:
+        title = (
+            f"{clip.id}: {event['event'].upper()} {event['rule']}, frame {fused.index}, "
+            f"VOx {fused.vox_label}"
+        )
+        try:
+            self._pictures.put_nowait((fused, clip.folder, title, range_c))
+        except queue.Full:  # a picture of an old event helps no one: the clip is kept
+            self.pictures_skipped += 1
+            self.log(f"clip {clip.id}: no overlay or point cloud ({PICTURES_WAITING} waiting)")
+
+    def _paint(self) -> None:
+        from ..figures import display_range_c
+
+        while (item := self._pictures.get()) is not _END:
+            fused, folder, title, range_c = item
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+                scale = range_c or display_range_c(fused.temp_depth_c)
+                write_snapshot(fused, folder / "overlay.png", folder / "frame.ply", title, scale)
+            except Exception as exc:
+                self.on_fault(f"{folder.name}: overlay and point cloud not kept: {exc}")
+
+    def feed(self, rig: str, match: Match) -> None:
+        """A rig's pair: into its open clip, which is finished once its time is over."""
+        with self._lock:
+            clip = self.open.get(rig)
+            if clip is not None and not clip.add(match):
+                self._end(rig)
+
+    def _end(self, rig: str) -> None:
+        """The rig's open clip takes no more pairs (under the lock)."""
+        clip = self.open.pop(rig)
+        self.finished.append(clip)
+        clip.finish()
+
+    def close(self, timeout_s: float = 30.0) -> None:
+        """Finish every clip (with the pairs it has) and the pictures queued; wait for them."""
+        with self._lock:
+            clips = [*self.open.values(), *self.finished]
+            for clip in self.open.values():
+                clip.finish()
+            self.open.clear()
+        self._pictures.put(_END)
+        for clip in clips:
+            clip.join(timeout_s)
+        self._painter.join(timeout_s)

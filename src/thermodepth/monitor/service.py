@@ -1,0 +1,462 @@
+"""The monitor: every rig of a config supervised (:mod:`.supervisor`), their events written,
+evidenced and published, the storage kept bounded, health told over HTTP and to systemd.
+
+Every event goes the same way (:meth:`Monitor.emit`): a raising event gets its clip first
+(:mod:`.evidence`), then its row in the event store (written before it is published), then the
+broker's outbox, then a log line. An event the store cannot take (a full disk) is published
+from memory, kept in memory until the store takes it again, and raises a ``storage_fault``:
+measuring and alarming go on.
+
+The monitor's clock (:data:`TICK_S`) watches each rig: no new frame for its ``stall_s``
+(longer while its shutter closes), or the same frame again and again, is a stall (the rig's
+source is closed, recovered and reopened) and a ``sensor_fault``; it also sends systemd its
+watchdog, publishes the rigs' status, and sweeps the storage every :data:`SWEEP_S`.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable
+from datetime import datetime, timezone
+from typing import Any
+
+from .. import __version__
+from ..alarms import RAISED, event_line
+from ..pipeline import FusedFrame
+from .config import MONITOR, MonitorConfig
+from .evidence import Evidence
+from .failsafe import STORAGE_FAULT, Fault
+from .publish import MonitorPublisher
+from .rig import RigSink
+from .storage import CLIPS, Retention
+from .store import EventStore
+from .supervisor import AckRefusedError, RigRunner
+from .systemd import notify, watchdog_interval_s
+
+TICK_S = 0.25
+SWEEP_S = 30.0
+STATUS_EVERY_S = 10.0
+STORE_NAME = "events.sqlite"
+
+
+def utc_of(time_s: float) -> str:
+    """A Unix time as ISO 8601 UTC with milliseconds."""
+    return datetime.fromtimestamp(time_s, timezone.utc).isoformat(timespec="milliseconds")
+
+
+def quantiles(values: deque[float]) -> dict[str, float | int | None]:
+    """Median and 99th percentile (s) of recent values, and how many."""
+    v = sorted(values)
+    if not v:
+        return {"median": None, "p99": None, "n": 0}
+    return {
+        "median": round(v[len(v) // 2], 4),
+        "p99": round(v[min(len(v) - 1, int(0.99 * len(v)))], 4),
+        "n": len(v),
+    }
+
+
+class Monitor:
+    """The monitor of ``config`` (module docstring); ``log``: one line each of what happens.
+    ``start`` and ``stop`` it; ``reload`` a new config while it runs."""
+
+    def __init__(self, config: MonitorConfig, log: Callable[[str], None] = print) -> None:
+        self.config, self.log = config, log
+        self.started_mono = time.monotonic()
+        self.started_utc = utc_of(time.time())
+        self.store = EventStore(config.storage.path / STORE_NAME)
+        self.backlog: list[dict[str, Any]] = []  # events the store could not take yet
+        self.event_counts: Counter[tuple[str, str]] = Counter()
+        self.latency_s: dict[str, deque[float]] = {
+            "event_row": deque(maxlen=1000),
+            "broker": deque(maxlen=1000),
+        }
+        self._captured: dict[int, float] = {}  # event id -> its frame's capture time (Unix s)
+        self._lock = threading.RLock()
+        self._storage_fault = Fault(STORAGE_FAULT, "disk")
+        self._storage_lines: list[str] = []
+        self._build(config)
+
+    # -- parts ---------------------------------------------------------------------------------
+
+    def _build(self, config: MonitorConfig) -> None:
+        """The parts a config makes (not started)."""
+        self.config = config
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.http: Any = None
+        s = config.storage
+        self.evidence = Evidence(
+            s.path / CLIPS, s.pre_s, s.post_s, s.clip_max_s, self.storage_problem, self.log
+        )
+        self.runners = {
+            rig.name: RigRunner(
+                rig, s, config.failsafe, self.evidence, self.emit, self.log, self.storage_problem
+            )
+            for rig in config.rigs
+        }
+        self.retention = Retention(s, self._busy, self.store.clip_deleted)
+        self.publisher = (
+            MonitorPublisher(
+                config.mqtt,
+                self.store,
+                list(self.runners),
+                self.acknowledge,
+                self._published,
+                self.log,
+            )
+            if config.mqtt is not None
+            else None
+        )
+
+    def _busy(self) -> set[Any]:
+        busy = self.evidence.active_folders()
+        for r in self.runners.values():
+            if r.sink.continuous is not None:
+                busy |= r.sink.continuous.active
+        return busy
+
+    def start(self) -> None:
+        """Start every part: the broker first and the HTTP server (either may refuse with
+        one InputError line: nothing else has started), then the rigs and the clock."""
+        if self.publisher is not None:
+            self.publisher.start()
+        if self.config.http.listen is not None:
+            from .http import HttpServer
+
+            self.http = HttpServer(self, self.config.http)
+            try:
+                self.http.start()
+            except BaseException:
+                if self.publisher is not None:
+                    self.publisher.stop()
+                raise
+            self.log(f"monitor: HTTP on {self.http.url}")
+        for runner in self.runners.values():
+            runner.start()
+        for target, name in ((self._clock, "monitor clock"), (self._sweeper, "storage")):
+            thread = threading.Thread(target=target, name=name, daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        self.log(
+            f"monitor: watching {len(self.runners)} rigs ({', '.join(self.runners)}), "
+            f"storage {self.config.storage.path}"
+        )
+
+    def stop(self, reason: str = "stopped") -> None:
+        """Stop the rigs, finish the clips and recordings, say so to the broker, close."""
+        self._stop_parts(reason)
+        self._flush_backlog()
+        self.store.close()
+
+    def _stop_parts(self, reason: str) -> None:
+        """Everything but the event store stopped (see :meth:`stop`)."""
+        self._stop.set()
+        for runner in self.runners.values():
+            runner.stop()
+        for thread in self._threads:
+            thread.join(5.0)
+        self.evidence.close()
+        for runner in self.runners.values():
+            if runner.sink.continuous is not None:
+                runner.sink.continuous.join()
+        if self.publisher is not None:
+            self.publisher.stop(reason)
+        if self.http is not None:
+            self.http.stop()
+
+    def reload(self, config: MonitorConfig) -> None:
+        """Apply a new config while running: a rig changed (its entry or its settings
+        file's content), added or removed is restarted, added or stopped on its own; any
+        other change (storage, http, mqtt, failsafe) restarts every part. The event store
+        stays open."""
+        old = self.config
+        same_rest = old.model_copy(update={"rigs": []}) == config.model_copy(update={"rigs": []})
+        if not same_rest:
+            self.log("monitor: reloading every part (storage, http, mqtt or failsafe changed)")
+            self._restart(config)
+            return
+        keep = {r.name: r for r in config.rigs if self._unchanged(r)}
+        for name, runner in list(self.runners.items()):
+            if name not in keep:
+                runner.stop()
+                del self.runners[name]
+                self.log(f"{name}: stopped (reload)")
+        s = config.storage
+        for rig in config.rigs:
+            if rig.name not in self.runners:
+                runner = RigRunner(
+                    rig, s, config.failsafe, self.evidence, self.emit, self.log,
+                    self.storage_problem,
+                )  # fmt: skip
+                self.runners[rig.name] = runner
+                runner.start()
+                self.log(f"{rig.name}: started (reload)")
+        self.config = config
+        if self.publisher is not None and set(self.publisher.rigs) != set(self.runners):
+            self.publisher.stop("reloading")
+            self.publisher = MonitorPublisher(
+                config.mqtt,  # type: ignore[arg-type]
+                self.store,
+                list(self.runners),
+                self.acknowledge,
+                self._published,
+                self.log,
+            )
+            self.publisher.start()
+
+    def _unchanged(self, rig: Any) -> bool:
+        runner = self.runners.get(rig.name)
+        if runner is None or runner.config != rig:
+            return False
+        if rig.settings is None:
+            return True
+        try:
+            text = rig.settings.read_text(encoding="utf-8")
+        except OSError:
+            return False
+        return text == runner.settings_text
+
+    def _restart(self, config: MonitorConfig) -> None:
+        """Every part stopped and started again from ``config``; if it cannot start (a port
+        taken, a broker away), the old config is started again and the error raised."""
+        old = self.config
+        self._stop_parts("reloading")
+        if config.storage.path != old.storage.path:
+            self.store.close()
+            self.store = EventStore(config.storage.path / STORE_NAME)
+        try:
+            self._build(config)
+            self.start()
+        except BaseException:
+            self._stop_parts("reloading")
+            if config.storage.path != old.storage.path:
+                self.store.close()
+                self.store = EventStore(old.storage.path / STORE_NAME)
+            self._build(old)
+            self.start()
+            raise
+
+    # -- events --------------------------------------------------------------------------------
+
+    def emit(self, sink: RigSink, events: list[dict[str, Any]], fused: FusedFrame | None) -> None:
+        """A rig's events (module docstring): clip, row, outbox, line."""
+        runner = self.runners.get(sink.name)
+        for event in events:
+            event = {**event, "rig": sink.name}
+            if runner is not None and runner.config.location:
+                event["location"] = runner.config.location
+            captured = None
+            if fused is not None:
+                event["vox_temp_c"] = (
+                    None if fused.vox_temp_c != fused.vox_temp_c else round(fused.vox_temp_c, 3)
+                )
+                if runner is not None and runner.wall_clock:
+                    captured = fused.thermal_time_s
+                if event["event"] in RAISED and sink.context is not None:
+                    fixed = runner.settings.viewer.fixed_range_c if runner else None
+                    event["clip"] = self.evidence.trigger(
+                        sink.name, event, fused, sink.context, sink.pre, fixed
+                    )
+            self.record(event, captured, runner is None or runner.wall_clock)
+
+    def record(
+        self, event: dict[str, Any], captured_s: float | None = None, unix_time: bool = True
+    ) -> None:
+        """Write, publish and tell one event (with ``rig``); ``captured_s``: its frame's
+        capture time (Unix s), for the latency figures; ``unix_time``: its ``time_s`` is a
+        Unix time (a rig on a live clock; else it is stamped with now)."""
+        time_s = event.get("time_s")
+        event["time_utc"] = utc_of(time_s if unix_time and time_s else time.time())
+        why = None
+        with self._lock:
+            self.event_counts[(event["rig"], event["event"])] += 1
+            self._flush_backlog()
+            try:
+                event["id"] = self.store.add(event, outbox=self.publisher is not None)
+            except sqlite3.Error as exc:
+                self.backlog.append(event)
+                why = (
+                    f"event {event['rig']} {event['rule']} not written to {self.store.path} "
+                    f"({exc}): kept in memory until it can be"
+                )
+            else:
+                if captured_s is not None:
+                    self.latency_s["event_row"].append(time.time() - captured_s)
+                    self._captured[event["id"]] = captured_s
+        if why is not None:
+            self.storage_problem(why)
+        if self.publisher is not None:
+            if why is None:
+                self.publisher.wake()
+            else:
+                self.publisher.publish_direct(event)
+        self.log(f"{event['rig']}: {event_line(event)}")
+
+    def _flush_backlog(self) -> None:
+        """Write the events the store could not take, in order, while it takes them."""
+        with self._lock:
+            while self.backlog:
+                try:
+                    self.backlog[0]["id"] = self.store.add(self.backlog[0])
+                except sqlite3.Error:
+                    return
+                self.backlog.pop(0)
+
+    def _published(self, event: dict[str, Any]) -> None:
+        captured = self._captured.pop(event.get("id", -1), None)
+        if captured is not None:
+            self.latency_s["broker"].append(time.time() - captured)
+
+    def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]:
+        """Acknowledge a rig's raised rule (who: ``by``); its events, recorded and published.
+        AckRefusedError (404 or 409) when it cannot be."""
+        runner = self.runners.get(rig)
+        if runner is None:
+            raise AckRefusedError(404, f"no rig {rig!r}")
+        events = runner.acknowledge(rule, by)
+        self.emit(runner.sink, events, None)
+        return events
+
+    def storage_problem(self, line: str) -> None:
+        """Something could not be kept: a ``storage_fault`` (raised once; cleared by a sweep
+        with nothing new to tell and space enough)."""
+        self.log(f"storage: {line}")
+        with self._lock:
+            self._storage_lines.append(line)
+            event = self._storage_fault.update(time.time(), True, line)
+        if event is not None:
+            self.record({**event, "rig": MONITOR})
+
+    # -- the clock -----------------------------------------------------------------------------
+
+    def _clock(self) -> None:
+        watchdog_s = watchdog_interval_s()
+        last = time.monotonic()
+        last_dog = last_status = float("-inf")
+        while not self._stop.wait(TICK_S):
+            now = time.monotonic()
+            dt, last = now - last, now
+            for runner in list(self.runners.values()):
+                self._watch(runner, now, dt)
+            alive = all(r.alive for r in self.runners.values())
+            if watchdog_s is not None and now - last_dog >= watchdog_s and alive:
+                notify("WATCHDOG=1")
+                last_dog = now
+            if self.publisher is not None and now - last_status >= STATUS_EVERY_S:
+                last_status = now
+                for r in self.status()["rigs"]:
+                    self.publisher.rig_status(r["name"], r)
+
+    def _watch(self, runner: RigRunner, now_mono: float, dt: float) -> None:
+        s = runner.status
+        if s.state in ("ended", "stopped"):
+            return
+        age = s.age_s(now_mono)
+        events = runner.watch.tick(time.time(), age, s.in_ffc, s.last_frame_mono is None)
+        if runner.watch.faults["no_data"].raised:
+            s.seconds_without_data += dt
+        if events:
+            self.emit(runner.sink, events, None)
+        if s.state != "running":
+            return
+        limit = runner.config.stall_s + (self.config.failsafe.ffc_grace_s if s.in_ffc else 0.0)
+        quiet = s.quiet_s(now_mono)
+        if quiet >= limit:
+            runner.abort_stalled(f"no new frame for {quiet:.1f} s")
+        elif s.frozen_since_mono is not None and now_mono - s.frozen_since_mono >= limit:
+            runner.abort_stalled(f"the same frame for {now_mono - s.frozen_since_mono:.1f} s")
+
+    def _sweeper(self) -> None:
+        while True:
+            self.sweep()
+            if self._stop.wait(SWEEP_S):
+                return
+
+    def sweep(self) -> None:
+        """Apply the storage rule, write what the store could not take; clear the storage
+        fault when nothing new went wrong and space is enough."""
+        try:
+            low = self.retention.sweep()
+        except OSError as exc:
+            low = f"{self.config.storage.path}: cannot sweep ({exc.strerror or exc})"
+        self._flush_backlog()
+        with self._lock:
+            lines, self._storage_lines = self._storage_lines, []
+            quiet = not lines and low is None and not self.backlog
+        if low is not None:
+            self.storage_problem(low)
+        elif quiet:
+            event = self._storage_fault.update(time.time(), False)
+            if event is not None:
+                self.record({**event, "rig": MONITOR})
+
+    # -- what it tells -------------------------------------------------------------------------
+
+    def stale_rigs(self) -> list[str]:
+        """The rigs without fresh data (none: healthy); a replay that ended is not one."""
+        now = time.monotonic()
+        return [
+            r.name
+            for r in self.runners.values()
+            if r.status.state != "ended"
+            and (r.status.state != "running" or r.status.age_s(now) >= r.config.stall_s)
+        ]
+
+    def status(self) -> dict[str, Any]:
+        """Everything ``/api/status`` tells (module docstring of :mod:`.http`)."""
+        now = time.monotonic()
+        stale = set(self.stale_rigs())
+        rigs = []
+        for r in list(self.runners.values()):
+            d = r.status.as_dict(now)
+            d["up"] = int(r.name not in stale)
+            d["active_alarms"] = r.raised()
+            rigs.append(d)
+        path = self.config.storage.path
+        try:
+            import shutil
+
+            free = shutil.disk_usage(path).free
+        except OSError:
+            free = 0
+        return {
+            "version": __version__,
+            "started_utc": self.started_utc,
+            "uptime_s": round(now - self.started_mono, 1),
+            "rigs": rigs,
+            "storage": {
+                "path": str(path),
+                "free_bytes": free,
+                "event_store_bytes": self.store.size_bytes(),
+                "events_not_stored": len(self.backlog),
+                "pictures_skipped": self.evidence.pictures_skipped,
+                "deleted": dict(self.retention.deleted),
+                "fault": self._storage_fault.raised,
+            },
+            "mqtt": None
+            if self.publisher is None
+            else {
+                "broker": self.publisher.target.where,
+                "prefix": self.publisher.target.prefix,
+                "sent": self.publisher.sent,
+                "unacknowledged": self.publisher.connection.pending,
+            },
+            "event_counts": {
+                rig: {state: n for (r, state), n in self.event_counts.items() if r == rig}
+                for rig in sorted({r for r, _ in self.event_counts})
+            },
+            "latency_s": {k: quantiles(v) for k, v in self.latency_s.items()},
+        }
+
+    def events(
+        self, limit: int = 100, rig: str | None = None, before_id: int | None = None
+    ) -> list[dict[str, Any]]:
+        """The newest events (``/api/events``): those not yet in the store first."""
+        with self._lock:
+            waiting = [e for e in reversed(self.backlog) if rig is None or e["rig"] == rig]
+        stored = self.store.events(limit, rig, before_id)
+        return (waiting if before_id is None else []) + stored[: max(0, limit - len(waiting))]

@@ -1,0 +1,179 @@
+"""The event store: every event of every rig as a row of one SQLite file (WAL mode), written
+before the event is published, and the outbox of events the MQTT broker has not yet
+acknowledged (so that they survive the broker's absence and the monitor's restart).
+
+The schema is versioned (SQLite's ``user_version``) and migrated on open: each entry of
+:data:`MIGRATIONS` takes a file from one version to the next, in one transaction. A file of a
+newer version than this program knows is refused with one line. Rows are never deleted by
+the monitor (the storage rule deletes recordings and clips, not events).
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..io.measurements import jsonable
+
+MIGRATIONS: tuple[str, ...] = (
+    """
+    CREATE TABLE events (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        rig TEXT NOT NULL,
+        rule TEXT NOT NULL,
+        level TEXT NOT NULL,
+        state TEXT NOT NULL,
+        time_utc TEXT NOT NULL,
+        time_s REAL,
+        frame INTEGER,
+        value_c REAL,
+        condition TEXT,
+        fault TEXT,
+        clip TEXT,
+        clip_kept INTEGER NOT NULL DEFAULT 1,
+        by TEXT,
+        at_utc TEXT,
+        body TEXT NOT NULL
+    );
+    CREATE INDEX events_by_rig ON events (rig, id);
+    CREATE INDEX events_by_clip ON events (clip);
+    CREATE TABLE outbox (event_id INTEGER PRIMARY KEY REFERENCES events (id));
+    """,
+)
+"""Version N+1 of the schema from version N (the first: from an empty file)."""
+
+COLUMNS = (
+    *("rig", "rule", "level", "state", "time_utc", "time_s", "frame", "value_c"),
+    *("condition", "fault", "clip", "by", "at_utc"),
+)
+
+
+class EventStore:
+    """The events of a monitor in the SQLite file at ``path`` (module docstring); safe to use
+    from several threads. ``migrations``: the schema's steps (:data:`MIGRATIONS`)."""
+
+    def __init__(self, path: str | Path, migrations: Sequence[str] = MIGRATIONS) -> None:
+        self.path = Path(path)
+        self._lock = threading.Lock()
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+            self.db.execute("PRAGMA journal_mode=WAL")
+            self.db.execute("PRAGMA synchronous=FULL")  # an alarm's row survives a power cut
+            self.db.execute("PRAGMA busy_timeout=5000")
+            self.version = self._migrate(migrations)
+        except sqlite3.DatabaseError as exc:
+            raise InputError(f"{self.path}: not an event store ({exc})") from None
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot open ({exc.strerror or exc})") from None
+
+    def _migrate(self, migrations: Sequence[str]) -> int:
+        """Bring the file to the newest version; returns it."""
+        version = int(self.db.execute("PRAGMA user_version").fetchone()[0])
+        if version > len(migrations):
+            raise InputError(
+                f"{self.path}: event store of version {version}, newer than this thermodepth "
+                f"reads ({len(migrations)}): upgrade thermodepth"
+            )
+        for step in range(version, len(migrations)):
+            try:
+                self.db.executescript(
+                    f"BEGIN; {migrations[step]}; PRAGMA user_version = {step + 1}; COMMIT;"
+                )
+            except BaseException:
+                if self.db.in_transaction:
+                    self.db.execute("ROLLBACK")  # the file stays at the version before
+                raise
+        return len(migrations)
+
+    def add(self, event: dict[str, Any], outbox: bool = False) -> int:
+        """Write an event (a dict with ``rig``, ``rule``, ``level``, ``event``, ``time_utc``
+        and what else it tells); with ``outbox`` it also waits in the outbox until
+        :meth:`delivered`. Returns its id. sqlite3.Error when it cannot be written (a full
+        disk)."""
+        row = {k: event.get(k) for k in COLUMNS}
+        row["state"] = event["event"]
+        values = [row[k] for k in COLUMNS]
+        body = json.dumps(jsonable(event))
+        with self._lock:
+            self.db.execute("BEGIN IMMEDIATE")
+            try:
+                cur = self.db.execute(
+                    f"INSERT INTO events ({', '.join(COLUMNS)}, body) "
+                    f"VALUES ({', '.join('?' * (len(COLUMNS) + 1))})",
+                    [*values, body],
+                )
+                event_id = int(cur.lastrowid or 0)
+                if outbox:
+                    self.db.execute("INSERT INTO outbox (event_id) VALUES (?)", (event_id,))
+                self.db.execute("COMMIT")
+            except BaseException:
+                self.db.execute("ROLLBACK")
+                raise
+        return event_id
+
+    def _rows(self, sql: str, args: Sequence[Any]) -> list[dict[str, Any]]:
+        with self._lock:
+            rows = self.db.execute(sql, args).fetchall()
+        out = []
+        for event_id, body, kept in rows:
+            event = json.loads(body)
+            event["id"] = event_id
+            if event.get("clip") is not None:
+                event["clip_kept"] = bool(kept)
+            out.append(event)
+        return out
+
+    def events(
+        self, limit: int = 100, rig: str | None = None, before_id: int | None = None
+    ) -> list[dict[str, Any]]:
+        """The newest events (of one rig, older than an id), newest first, each with its
+        ``id`` and, where it has a clip, whether the clip is still kept."""
+        where: list[str] = []
+        args: list[Any] = []
+        if rig is not None:
+            where.append("rig = ?")
+            args.append(rig)
+        if before_id is not None:
+            where.append("id < ?")
+            args.append(before_id)
+        sql = "SELECT id, body, clip_kept FROM events"
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        return self._rows(sql + " ORDER BY id DESC LIMIT ?", [*args, limit])
+
+    def outbox(self, limit: int = 1000, after_id: int = 0) -> list[dict[str, Any]]:
+        """Events waiting for the broker, oldest first."""
+        return self._rows(
+            "SELECT id, body, clip_kept FROM events JOIN outbox ON outbox.event_id = events.id "
+            "WHERE id > ? ORDER BY id LIMIT ?",
+            [after_id, limit],
+        )
+
+    def delivered(self, event_id: int) -> None:
+        """The broker has the event: out of the outbox."""
+        with self._lock:
+            self.db.execute("DELETE FROM outbox WHERE event_id = ?", (event_id,))
+
+    def clip_deleted(self, clip: str) -> None:
+        """The events whose clip the storage rule deleted say so."""
+        with self._lock:
+            self.db.execute("UPDATE events SET clip_kept = 0 WHERE clip = ?", (clip,))
+
+    def count(self) -> int:
+        with self._lock:
+            return int(self.db.execute("SELECT count(*) FROM events").fetchone()[0])
+
+    def size_bytes(self) -> int:
+        """The file's size with its write-ahead log."""
+        wal = self.path.with_name(self.path.name + "-wal")
+        return sum(p.stat().st_size for p in (self.path, wal) if p.exists())
+
+    def close(self) -> None:
+        with self._lock:
+            self.db.close()

@@ -1,0 +1,271 @@
+"""The always-on monitor on the simulated rig, misbehaving when told: every fault detected,
+reopened and counted, the healthy rig unaffected, every event in the store with a clip that
+replays, and health, events and acknowledgements over HTTP (read by httpx and by
+prometheus_client's own parser)."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette", reason="the monitor needs the monitor extra (starlette)")
+pytest.importorskip("uvicorn", reason="the monitor needs the monitor extra (uvicorn)")
+pytest.importorskip("prometheus_client", reason="the monitor needs the monitor extra")
+
+import httpx
+from prometheus_client.parser import text_string_to_metric_families
+
+from monitor_helpers import PAPER_MODEL, monitor_config, settings_file, wait_for
+from thermodepth.monitor import Monitor, load_config
+from thermodepth.monitor.store import EventStore
+from thermodepth.sources import open_source
+
+RUN_S = 11.0
+SLOW = "sim:faults=unplug@1s+1.5s,stall@4s,corrupt@7s+1.5s"
+ODD = "sim:faults=ffc-storm@1s+3s,vox-ramp@4s"
+
+
+class Seen:
+    """What a run of the monitor showed while it ran and after."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.http: dict[str, Any] = {}
+
+
+@pytest.fixture(scope="module")
+def seen(tmp_path_factory: pytest.TempPathFactory) -> Seen:
+    """Three simulated rigs for RUN_S seconds: ``a`` unplugged, stalled and corrupt, ``b``
+    healthy, ``c`` with a shutter storm and its sensor drifting out of its model's range."""
+    folder = tmp_path_factory.mktemp("monitor")
+    flapping = settings_file(folder)
+    paper = settings_file(folder, PAPER_MODEL, "paper.yaml")
+    path = monitor_config(
+        folder,
+        [
+            {"name": "a", "source": SLOW, "settings": flapping.name, "stall_s": 1.0},
+            {"name": "b", "source": "sim", "settings": flapping.name, "location": "bay 2"},
+            {"name": "c", "source": ODD, "settings": paper.name},
+        ],
+        failsafe={
+            "shutter_window_s": 2,
+            "corrupt_s": 0.5,
+            "clear_s": 0.5,
+            "vox_margin_c": 0,
+        },
+    )
+    out = Seen()
+    out.folder = folder  # type: ignore[attr-defined]
+    monitor = Monitor(load_config(path), out.lines.append)
+    out.t0 = time.time()  # type: ignore[attr-defined]
+    monitor.start()
+    t0 = time.monotonic()
+    try:
+        url = monitor.http.url
+        client = httpx.Client(base_url=url, timeout=5)
+        wait_for(lambda: client.get("/healthz").status_code == 200, 5)
+        out.http["healthy"] = client.get("/healthz").json()
+        # a is unplugged from 1 s to 2.5 s: stale once its stall_s has passed
+        out.http["unplugged"] = wait_for(
+            lambda: (r := client.get("/healthz")).status_code == 503 and r.json(), 5
+        )
+        wait_for(lambda: "latched" in str(client.get("/api/status").json()), 5)
+        out.http["ack_unknown_rig"] = client.post(
+            "/api/ack", json={"rig": "z", "rule": "latched", "by": "jane"}
+        )
+        out.http["ack_unknown_rule"] = client.post(
+            "/api/ack", json={"rig": "b", "rule": "melt", "by": "jane"}
+        )
+        out.http["ack_bad"] = client.post("/api/ack", json={"rig": "b", "rule": "latched"})
+        out.http["ack"] = client.post(
+            "/api/ack", json={"rig": "b", "rule": "latched", "by": "operator jane"}
+        )
+        time.sleep(max(0.0, RUN_S - (time.monotonic() - t0)))
+        out.http["status"] = client.get("/api/status").json()
+        out.http["events"] = client.get("/api/events", params={"limit": 1000}).json()
+        out.http["page"] = client.get("/api/events", params={"limit": 5, "rig": "a"}).json()
+        out.http["metrics"] = client.get("/metrics").text
+        out.http["bad_limit"] = client.get("/api/events", params={"limit": "x"})
+        client.close()
+    finally:
+        out.status = monitor.status()  # type: ignore[attr-defined]
+        monitor.stop()
+    out.store = EventStore(folder / "store" / "events.sqlite")  # type: ignore[attr-defined]
+    return out
+
+
+def events_of(seen: Seen, rig: str, rule: str | None = None) -> list[dict[str, Any]]:
+    rows = seen.store.events(10_000, rig)  # type: ignore[attr-defined]
+    return [e for e in reversed(rows) if rule is None or e["rule"] == rule]
+
+
+def faults(seen: Seen, rig: str) -> list[tuple[str, str]]:
+    return [(e["event"], e["fault"]) for e in events_of(seen, rig, "sensor_fault")]
+
+
+def rig_status(seen: Seen, rig: str) -> dict[str, Any]:
+    return next(r for r in seen.status["rigs"] if r["name"] == rig)  # type: ignore[attr-defined]
+
+
+def test_unplug_and_stall_are_reopened_counted_and_fail_safe(seen: Seen) -> None:
+    a = rig_status(seen, "a")
+    assert a["stalls"] == 1  # the stall at 4 s, seen by the monitor's clock
+    assert a["reconnects"] >= 2  # after the unplugging and after the stall
+    assert a["seconds_without_data"] > 0.5
+    got = faults(seen, "a")
+    # unplugged and stalled: no data, each raised and cleared when frames came back
+    assert got.count(("alarm", "no_data")) == 2 and got.count(("clear", "no_data")) == 2
+    assert any("device lost: sim: unplugged at 1 s" in line for line in seen.lines)
+    assert any(line.startswith("a: stalled (no new frame for 1.") for line in seen.lines)
+    assert a["frames"] > 40
+
+
+def test_corrupt_frames_raise_and_clear_a_sensor_fault(seen: Seen) -> None:
+    got = faults(seen, "a")
+    assert ("alarm", "corrupt") in got and ("clear", "corrupt") in got
+    raised = next(e for e in events_of(seen, "a", "sensor_fault") if e["fault"] == "corrupt")
+    assert "of the frame's pixels cannot be values of their kind" in raised["condition"]
+    assert 7.0 <= raised_at(seen, raised) <= 9.0
+
+
+def raised_at(seen: Seen, event: dict[str, Any]) -> float:
+    """When an event happened, s after the monitor started."""
+    return float(event["time_s"]) - seen.t0  # type: ignore[attr-defined]
+
+
+def test_shutter_storm_and_vox_drift_raise_sensor_faults(seen: Seen) -> None:
+    got = faults(seen, "c")
+    assert ("alarm", "shutter") in got and ("clear", "shutter") in got
+    vox = [e for e in events_of(seen, "c", "sensor_fault") if e["fault"] == "vox_range"]
+    assert [e["event"] for e in vox] == ["alarm"]  # drifting on: still raised at the end
+    assert "outside the fitted 25-40 C" in vox[0]["condition"]
+    assert vox[0]["vox_temp_c"] is None or vox[0]["vox_temp_c"] > 40  # 1 K/s from 35 C at 4 s
+    assert {"rule": "sensor_fault", "level": "alarm", "fault": "vox_range"} in rig_status(
+        seen, "c"
+    )["active_alarms"]
+
+
+def test_the_healthy_rig_is_unaffected(seen: Seen) -> None:
+    b = rig_status(seen, "b")
+    assert faults(seen, "b") == []
+    assert b["reconnects"] == 0 and b["stalls"] == 0 and b["seconds_without_data"] == 0
+    assert b["frames"] >= 0.9 * 8.7 * RUN_S  # no gap while a and c misbehaved
+    assert abs(b["fps"] - 8.7) < 0.5
+    assert b["dropped"] == 0
+
+
+def test_every_event_is_stored_and_every_alarm_has_a_clip_that_replays(seen: Seen) -> None:
+    counts = seen.status["event_counts"]  # type: ignore[attr-defined]
+    stored = seen.store.events(100_000)  # type: ignore[attr-defined]
+    assert len(stored) == sum(n for rig in counts.values() for n in rig.values())
+    raised = [e for e in stored if e["event"] in ("alarm", "escalated") and e["rig"] in "ab"]
+    raised = [e for e in raised if e["rule"] != "sensor_fault"]
+    assert len(raised) >= 10
+    assert all(e.get("clip") for e in raised)
+    clips = {e["clip"] for e in raised}
+    assert len(clips) >= 4  # clips end after clip_max_s: 3 s
+    root = seen.folder / "store" / "clips"  # type: ignore[attr-defined]
+    for clip in clips:
+        folder = root / clip
+        assert (folder / "overlay.png").stat().st_size > 10_000
+        assert (folder / "frame.ply").read_bytes().startswith(b"ply\n")
+        with open_source(f"recording:{folder / 'clip.zarr'}") as src:
+            pairs = list(src)
+        times = np.array([p.thermal_time_s for p in pairs])
+        assert np.all(np.diff(times) > 0)
+        for e in (e for e in raised if e["clip"] == clip):
+            assert e["frame"] in {p.index for p in pairs}  # the frame that raised it
+            assert times[0] - 1e-4 <= e["time_s"] <= times[-1] + 1e-4  # times to 0.1 ms
+
+
+def test_a_clip_holds_the_seconds_before_its_first_event(seen: Seen) -> None:
+    by_clip: dict[str, list[float]] = {}
+    for e in events_of(seen, "b"):
+        if e.get("clip"):
+            by_clip.setdefault(e["clip"], []).append(e["time_s"])
+    # a clip begun after the first seconds, when the pre-trigger buffer is full
+    clip, times_s = next((c, t) for c, t in by_clip.items() if min(t) - seen.t0 > 3.0)  # type: ignore[attr-defined]
+    path = seen.folder / "store" / "clips" / clip / "clip.zarr"  # type: ignore[attr-defined]
+    with open_source(f"recording:{path}") as src:
+        frames_s = [p.thermal_time_s for p in src]
+    assert min(times_s) - frames_s[0] == pytest.approx(1.0, abs=0.15)  # pre_s, to a frame
+    assert frames_s[-1] - max(times_s) <= 1.0 + 1e-3  # post_s
+
+
+def test_healthz_says_which_rig_is_stale(seen: Seen) -> None:
+    assert seen.http["healthy"] == {"status": "ok"}
+    assert seen.http["unplugged"] == {"status": "stale", "rigs": ["a"]}
+
+
+def test_acknowledge_over_http(seen: Seen) -> None:
+    assert seen.http["ack_unknown_rig"].status_code == 404
+    assert seen.http["ack_unknown_rule"].status_code == 404
+    assert seen.http["ack_unknown_rule"].json() == {"error": "b: no alarm rule 'melt'"}
+    assert seen.http["ack_bad"].status_code == 400
+    ack = seen.http["ack"]
+    assert ack.status_code == 200
+    (event,) = ack.json()
+    assert event["event"] == "acknowledged" and event["by"] == "operator jane"
+    stored = [e for e in events_of(seen, "b", "latched")]
+    assert [e["event"] for e in stored] == ["alarm", "acknowledged"]  # latched: still hot
+    assert stored[1]["by"] == "operator jane" and stored[1]["at_utc"].endswith("+00:00")
+
+
+def test_status_and_events_over_http(seen: Seen) -> None:
+    status = seen.http["status"]
+    assert [r["name"] for r in status["rigs"]] == ["a", "b", "c"]
+    b = status["rigs"][1]
+    assert b["location"] == "bay 2" and b["up"] == 1 and b["vox_temp_c"] == 35.0
+    assert b["pipeline_ms"]["median"] > 0 and b["last_frame_age_s"] < 0.5
+    assert status["storage"]["event_store_bytes"] > 0
+    events = seen.http["events"]
+    ids = [e["id"] for e in events]
+    assert ids == sorted(ids, reverse=True)  # newest first
+    assert {"rig", "rule", "level", "event", "time_s", "time_utc"} <= set(events[0])
+    page = seen.http["page"]
+    assert len(page) == 5 and {e["rig"] for e in page} == {"a"}
+    assert seen.http["bad_limit"].status_code == 400
+
+
+def test_metrics_read_by_prometheus_own_parser(seen: Seen) -> None:
+    samples = [s for f in text_string_to_metric_families(seen.http["metrics"]) for s in f.samples]
+
+    def value(name: str, **labels: str) -> float:
+        return next(s.value for s in samples if s.name == name and s.labels == labels)
+
+    assert value("thermodepth_rig_stalls_total", rig="a") == 1
+    assert value("thermodepth_rig_reconnects_total", rig="b") == 0
+    assert value("thermodepth_rig_up", rig="b") == 1
+    assert value("thermodepth_rig_frames_total", rig="b") > 80
+    assert value("thermodepth_rig_alarms_active", rig="c", level="alarm") >= 1
+    assert value("thermodepth_events_total", rig="a", state="alarm") >= 3
+    assert value("thermodepth_event_store_bytes") > 0
+    row = value("thermodepth_alarm_latency_seconds", to="event_row", quantile="0.5")
+    assert 0 < row < 0.2 and not math.isnan(row)
+
+
+def test_a_token_guards_everything_but_healthz(tmp_path: Path) -> None:
+    (tmp_path / "token").write_text("s3cret\n", encoding="utf-8")
+    path = monitor_config(
+        tmp_path,
+        [{"name": "t", "source": "sim", "settings": settings_file(tmp_path).name}],
+        http={"token_file": "token"},
+    )
+    monitor = Monitor(load_config(path), lambda line: None)
+    monitor.start()
+    try:
+        with httpx.Client(base_url=monitor.http.url, timeout=5) as client:
+            assert client.get("/api/status").status_code == 401
+            assert client.get("/metrics").status_code == 401
+            wrong = {"Authorization": "Bearer nope"}
+            assert client.get("/api/events", headers=wrong).status_code == 401
+            right = {"Authorization": "Bearer s3cret"}
+            assert client.get("/api/status", headers=right).status_code == 200
+            assert client.get("/healthz").status_code in (200, 503)
+    finally:
+        monitor.stop()
