@@ -85,10 +85,13 @@ class EventStore:
                 self.db.executescript(
                     f"BEGIN; {migrations[step]}; PRAGMA user_version = {step + 1}; COMMIT;"
                 )
-            except BaseException:
+            except sqlite3.Error as exc:
                 if self.db.in_transaction:
                     self.db.execute("ROLLBACK")  # the file stays at the version before
-                raise
+                raise InputError(
+                    f"{self.path}: cannot migrate the event store from version {step} to "
+                    f"{step + 1} ({exc})"
+                ) from None
         return len(migrations)
 
     def add(self, event: dict[str, Any], outbox: bool = False) -> int:
