@@ -5,7 +5,9 @@ prometheus_client's own parser)."""
 
 from __future__ import annotations
 
+import json
 import math
+import sqlite3
 import time
 from pathlib import Path
 from typing import Any
@@ -269,3 +271,47 @@ def test_a_token_guards_everything_but_healthz(tmp_path: Path) -> None:
             assert client.get("/healthz").status_code in (200, 503)
     finally:
         monitor.stop()
+
+
+def test_events_the_store_cannot_take_are_kept_published_and_written_later(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = monitor_config(
+        tmp_path, [{"name": "t", "source": "sim", "settings": settings_file(tmp_path).name}]
+    )
+    lines: list[str] = []
+    monitor = Monitor(load_config(path), lines.append)
+    real_add = monitor.store.add
+
+    def full(event: dict[str, Any], outbox: bool = False) -> int:
+        raise sqlite3.OperationalError("database or disk is full")
+
+    monitor.start()
+    try:
+        wait_for(lambda: monitor.store.count() >= 2, 10)
+        monkeypatch.setattr(monitor.store, "add", full)
+        wait_for(lambda: len(monitor.backlog) >= 4, 10)
+        with httpx.Client(base_url=monitor.http.url, timeout=5) as client:
+            shown = client.get("/api/events").json()
+        waiting = [e for e in shown if "id" not in e]
+        assert len(waiting) >= 4 and shown[: len(waiting)] == waiting  # told first
+        fault = next(e for e in waiting if e["rule"] == "storage_fault")
+        assert fault["event"] == "alarm" and fault["rig"] == "monitor"
+        assert fault["condition"].startswith("event t ")
+        assert fault["condition"].endswith(
+            "(database or disk is full): kept in memory until it can be"
+        )
+        assert monitor.status()["storage"]["fault"] is True
+        monkeypatch.setattr(monitor.store, "add", real_add)  # space again
+        monitor.sweep()  # written, in order ...
+        assert monitor.backlog == []
+        monitor.sweep()  # ... and a sweep with nothing new to tell clears the fault
+        stored = monitor.store.events(1000)
+        assert {"alarm", "clear"} <= {e["event"] for e in stored if e["rule"] == "storage_fault"}
+        monkeypatch.setattr(monitor.store, "add", full)
+        wait_for(lambda: monitor.backlog, 10)
+    finally:
+        monitor.stop()  # a disk still full: the log keeps what could not be written
+    at = next(i for i, line in enumerate(lines) if "events could not be written to" in line)
+    assert all(json.loads(line)["rig"] in ("t", "monitor") for line in lines[at + 1 :])
+    assert len(lines) > at + 1

@@ -72,9 +72,10 @@ class MonitorPublisher:
         return f"{self.target.prefix}/{rig}/{leaf}"
 
     def start(self) -> None:
-        """Connect (one InputError line when the broker cannot be reached), say the monitor
-        runs, listen for acknowledgements and start sending the outbox."""
-        self.connection.connect()
+        """Connect (one InputError line when the broker refuses; one warning when it cannot
+        be reached yet: the monitor starts, and the outbox waits), say the monitor runs,
+        listen for acknowledgements and start sending the outbox."""
+        self.connection.connect(required=False)
         self._status(MONITOR, {"state": "running", "rigs": self.rigs, "since_utc": utc_now()})
         for rig in self.rigs:
             self.connection.subscribe(self.topic(rig, "ack"), self._ack_command)

@@ -205,8 +205,9 @@ def _time_of(event: StreamEvent) -> float:
 class RigSink(BaseSink):
     """The monitor's sink of one rig's sessions (every reopening a session of its own):
     every event to the pre-trigger buffer (``pre``), the open clip (``evidence``) and the
-    continuous recording; every fused frame's figures to ``status``, its alarm events and
-    sensor faults (``watch``) to ``emit(sink, events, fused)``."""
+    continuous recording; every fused frame's figures to ``status`` and the frame to
+    ``measured(sink, fused)``, its alarm events and sensor faults (``watch``) to
+    ``emit(sink, events, fused)``."""
 
     def __init__(
         self,
@@ -217,9 +218,10 @@ class RigSink(BaseSink):
         continuous: ContinuousRecorder | None,
         watch: SensorWatch,
         emit: Callable[[RigSink, list[dict[str, Any]], FusedFrame | None], None],
+        measured: Callable[[RigSink, FusedFrame], None],
     ) -> None:
         self.name, self.status, self.pre, self.evidence = name, status, pre, evidence
-        self.continuous, self.watch, self.emit = continuous, watch, emit
+        self.continuous, self.watch, self.emit, self.measured = continuous, watch, emit, measured
         self.context: RunContext | None = None
         self._match_at: float | None = None
         self._previous: np.ndarray | None = None
@@ -262,6 +264,7 @@ class RigSink(BaseSink):
         events = fused.events + self.watch.frame(fused, fused.thermal_time_s)
         if events:
             self.emit(self, events, fused)
+        self.measured(self, fused)
 
     def close(self, result: SessionResult) -> None:
         self.status.counters = dict(result.counters)

@@ -15,6 +15,7 @@ watchdog, publishes the rigs' status, and sweeps the storage every :data:`SWEEP_
 
 from __future__ import annotations
 
+import json
 import sqlite3
 import threading
 import time
@@ -25,8 +26,9 @@ from typing import Any
 
 from .. import __version__
 from ..alarms import RAISED, event_line
+from ..io.measurements import jsonable
 from ..pipeline import FusedFrame
-from .config import MONITOR, MonitorConfig
+from .config import MONITOR, MonitorConfig, RigConfig
 from .evidence import Evidence
 from .failsafe import STORAGE_FAULT, Fault
 from .publish import MonitorPublisher
@@ -92,12 +94,7 @@ class Monitor:
         self.evidence = Evidence(
             s.path / CLIPS, s.pre_s, s.post_s, s.clip_max_s, self.storage_problem, self.log
         )
-        self.runners = {
-            rig.name: RigRunner(
-                rig, s, config.failsafe, self.evidence, self.emit, self.log, self.storage_problem
-            )
-            for rig in config.rigs
-        }
+        self.runners = {rig.name: self._runner(rig) for rig in config.rigs}
         self.retention = Retention(s, self._busy, self.store.clip_deleted)
         self.publisher = (
             MonitorPublisher(
@@ -111,6 +108,24 @@ class Monitor:
             if config.mqtt is not None
             else None
         )
+
+    def _runner(self, rig: RigConfig, config: MonitorConfig | None = None) -> RigRunner:
+        c = config or self.config
+        return RigRunner(
+            rig,
+            c.storage,
+            c.failsafe,
+            self.evidence,
+            self.emit,
+            self.measured,
+            self.log,
+            self.storage_problem,
+        )
+
+    def measured(self, sink: RigSink, fused: FusedFrame) -> None:
+        """A rig's fused frame: its summary to the broker (at its rate)."""
+        if self.publisher is not None:
+            self.publisher.measurement(sink.name, fused)
 
     def _busy(self) -> set[Any]:
         busy = self.evidence.active_folders()
@@ -150,6 +165,13 @@ class Monitor:
         """Stop the rigs, finish the clips and recordings, say so to the broker, close."""
         self._stop_parts(reason)
         self._flush_backlog()
+        if self.backlog:  # a disk still full: the log keeps them
+            self.log(
+                f"storage: {len(self.backlog)} events could not be written to "
+                f"{self.store.path}; here they are, one JSON line each:"
+            )
+            for event in self.backlog:
+                self.log(json.dumps(jsonable(event)))
         self.store.close()
 
     def _stop_parts(self, reason: str) -> None:
@@ -185,13 +207,9 @@ class Monitor:
                 runner.stop()
                 del self.runners[name]
                 self.log(f"{name}: stopped (reload)")
-        s = config.storage
         for rig in config.rigs:
             if rig.name not in self.runners:
-                runner = RigRunner(
-                    rig, s, config.failsafe, self.evidence, self.emit, self.log,
-                    self.storage_problem,
-                )  # fmt: skip
+                runner = self._runner(rig, config)
                 self.runners[rig.name] = runner
                 runner.start()
                 self.log(f"{rig.name}: started (reload)")

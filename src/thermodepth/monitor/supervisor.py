@@ -48,7 +48,8 @@ class AckRefusedError(Exception):
 
 class RigRunner:
     """One rig (module docstring). ``emit(sink, events, fused)``: where its events go;
-    ``log``: one line each of what happens to it."""
+    ``measured(sink, fused)``: told of each fused frame; ``log``: one line each of what
+    happens to it; ``on_storage_fault``: what its continuous recording could not keep."""
 
     def __init__(
         self,
@@ -57,6 +58,7 @@ class RigRunner:
         failsafe: FailsafeConfig,
         evidence: Evidence,
         emit: Callable[[RigSink, list[dict[str, Any]], FusedFrame | None], None],
+        measured: Callable[[RigSink, FusedFrame], None],
         log: Callable[[str], None],
         on_storage_fault: Callable[[str], None],
     ) -> None:
@@ -83,7 +85,9 @@ class RigRunner:
             else None
         )
         pre = PreTrigger(storage.pre_s, int(storage.pre_max_mb * MB))
-        self.sink = RigSink(config.name, self.status, pre, evidence, continuous, self.watch, emit)
+        self.sink = RigSink(
+            config.name, self.status, pre, evidence, continuous, self.watch, emit, measured
+        )
         self.pipeline: Pipeline | None = None
         self.source: PacedSource | None = None
         self._stop = threading.Event()

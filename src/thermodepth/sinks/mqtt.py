@@ -175,7 +175,10 @@ class MqttConnection:
         self._refused: str | None = None
         self._closing = False
 
-    def connect(self) -> None:
+    def connect(self, required: bool = True) -> None:
+        """Connect; one InputError line when the broker refuses (a wrong password), or when
+        it cannot be reached and ``required`` (else one line to ``warn``, and paho goes on
+        trying in the background: messages wait until it is there)."""
         import paho.mqtt.client as mqtt
 
         t, s = self.target, self.settings
@@ -194,16 +197,27 @@ class MqttConnection:
         client.on_message = self._on_message
         self.client = client
         try:
-            client.connect(t.host, t.port, keepalive=10)
+            if required:
+                client.connect(t.host, t.port, keepalive=10)
+            else:
+                client.connect_async(t.host, t.port, keepalive=10)
         except (OSError, ValueError) as exc:
             why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
             raise InputError(f"{t.where}: cannot reach the MQTT broker ({why})") from None
         client.loop_start()
-        if not self._connected.wait(s.connect_timeout_s) or self._refused:
-            client.loop_stop()
-            client.disconnect()
-            why = self._refused or f"no answer in {s.connect_timeout_s:g} s"
-            raise InputError(f"{t.where}: the MQTT broker refused the connection: {why}")
+        answered = self._connected.wait(s.connect_timeout_s)
+        if answered and not self._refused:
+            return
+        if not required and not answered:
+            self._lost_at = time.monotonic()
+            self.warn(
+                f"MQTT: cannot reach {t.where} yet; trying on, messages wait until it answers"
+            )
+            return
+        client.loop_stop()
+        client.disconnect()
+        why = self._refused or f"no answer in {s.connect_timeout_s:g} s"
+        raise InputError(f"{t.where}: the MQTT broker refused the connection: {why}")
 
     # -- paho's callbacks (its network thread) ---------------------------------------------
 
@@ -288,10 +302,15 @@ class MqttConnection:
         self._handlers[topic] = handler
         self.client.subscribe(topic, qos=1)
 
+    @property
+    def connected(self) -> bool:
+        return self._connected.is_set() and self._lost_at is None and not self._refused
+
     def close(self, wait_s: float = DELIVERY_WAIT_S) -> None:
-        """Wait up to ``wait_s`` for the messages still unacknowledged, then disconnect."""
+        """Wait up to ``wait_s`` for the messages still unacknowledged (while the broker is
+        there), then disconnect."""
         deadline = time.monotonic() + wait_s
-        while time.monotonic() < deadline and self.pending:
+        while time.monotonic() < deadline and self.pending and self.connected:
             time.sleep(0.05)
         time.sleep(0.1)  # the last message's own acknowledgement
         self._closing = True
