@@ -8,7 +8,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= demo-out
 
-.PHONY: demo test bench lint venv clean
+.PHONY: demo test bench soak lint venv clean
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -26,6 +26,10 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench
+
+# the monitor for an hour with faults; memory, open files and threads (bench-out/soak_monitor.json)
+soak: $(STAMP)
+	$(BIN)/python -m bench.soak_monitor --minutes 60
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench
