@@ -514,6 +514,69 @@ def test_no_purethermal_lists_what_was_found(tmp_path: Path) -> None:
         LeptonCamera(sysfs=tmp_path / "none")
 
 
+def usb_tree(root: Path, index: int, bus: int, dev: int) -> tuple[Path, Path]:
+    """A sysfs video node /dev/videoN under a USB interface of device BUS-DEV, as the kernel
+    lays it out (busnum and devnum on the device, above the interface), and its usbfs node."""
+    usb = root / "devices" / "usb1" / "1-1"
+    (usb / "1-1:1.0").mkdir(parents=True)
+    (usb / "busnum").write_text(f"{bus}\n")
+    (usb / "devnum").write_text(f"{dev}\n")
+    node = root / "class" / f"video{index}"
+    node.mkdir(parents=True)
+    (node / "device").symlink_to(usb / "1-1:1.0")
+    devfs = root / "bus" / "usb"
+    (devfs / f"{bus:03d}").mkdir(parents=True)
+    (devfs / f"{bus:03d}" / f"{dev:03d}").write_bytes(b"")
+    return root / "class", devfs
+
+
+def test_usb_reset_of_a_stalled_camera(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    sysfs, devfs = usb_tree(tmp_path, 2, bus=1, dev=5)
+    assert uvc_mod.usb_device_node(2, sysfs, devfs) == devfs / "001" / "005"
+    calls = []
+    monkeypatch.setattr(uvc_mod.fcntl, "ioctl", lambda fd, request, arg: calls.append(request))
+    line = uvc_mod.usb_reset(2, "lepton:2", sysfs, devfs)
+    assert line == f"lepton:2: USB reset of {devfs / '001' / '005'}"
+    assert calls == [0x5514]  # USBDEVFS_RESET, _IO('U', 20) of linux/usbdevice_fs.h
+    monkeypatch.undo()
+    # a node that is not usbfs refuses the ioctl: said, not raised
+    assert uvc_mod.usb_reset(2, "lepton:2", sysfs, devfs).startswith(
+        f"lepton:2: USB reset of {devfs / '001' / '005'} failed ("
+    )
+
+
+def test_usb_reset_says_where_it_may_not(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    sysfs, devfs = usb_tree(tmp_path, 2, bus=3, dev=9)
+
+    def refused(path: object, flags: int) -> int:
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(uvc_mod.os, "open", refused)
+    assert uvc_mod.usb_reset(2, "lepton:2", sysfs, devfs) == (
+        f"lepton:2: no USB reset of {devfs / '003' / '009'}: this process may not write it "
+        "(run as root, or grant it with a udev rule)"
+    )
+    monkeypatch.undo()
+    assert uvc_mod.usb_reset(7, "boson:7", sysfs, devfs) == (
+        "boson:7: no USB reset: /dev/video7 is not a USB device here"
+    )
+
+
+def test_a_paired_source_recovers_through_its_thermal_camera(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    use_capture(monkeypatch, FakeCapture([lepton_frame(1)]))
+    src = PairedSource(FakeDepth(1), LeptonCamera(index=4, timeout_s=0.05, sysfs=tmp_path))
+    src.close()
+    asked = []
+    monkeypatch.setattr(
+        uvc_mod, "usb_reset", lambda *a: asked.append(a) or f"{a[1]}: USB reset of BBB/DDD"
+    )
+    assert src.recover() == "lepton:4: USB reset of BBB/DDD"
+    assert asked == [(4, "lepton:4", tmp_path)]
+    assert open_source("sim", frames=1).recover() is None  # nothing to reset
+
+
 class EndlessCapture(FakeCapture):
     """read() returns ``make(k)`` forever, one frame per 5 ms; fails the test after 3 s (a
     camera that never gives up)."""
