@@ -215,16 +215,15 @@ class AlarmTracker:
     ) -> list[dict[str, Any]]:
         """The events of a measured frame."""
         with self._lock:
-            return self._update(time_s, frame_index, hotspots, rois)
+            return self._events(time_s, frame_index, hotspots, {r.name: r for r in rois})
 
-    def _update(
+    def _events(
         self,
         time_s: float,
         frame_index: int,
         hotspots: Sequence[Hotspot],
-        rois: Iterable[RoiStats],
+        by_name: dict[str, RoiStats],
     ) -> list[dict[str, Any]]:
-        by_name = {r.name: r for r in rois}
         events: list[dict[str, Any]] = []
         self._last = (time_s, frame_index)
         for rule in self.rules:

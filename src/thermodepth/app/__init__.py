@@ -22,5 +22,7 @@ module                 use cases
 :mod:`.temperature`    ``counts_to_celsius``
 :mod:`.devices`        ``list_devices``, ``describe_devices``
 :mod:`.demo`           ``run_demo``: the whole story on the simulated rig
+:mod:`.monitor`        ``run_monitor`` (the always-on monitor of a config, until stopped),
+                       ``describe_config`` (``monitor --check``)
 =====================  ======================================================================
 """

@@ -25,7 +25,7 @@ import hmac
 import socket
 import threading
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from ..errors import InputError
 from .config import HttpConfig, read_token
@@ -36,7 +36,19 @@ if TYPE_CHECKING:
     from starlette.requests import Request
     from starlette.responses import Response
 
-    from .service import Monitor
+
+class Monitor(Protocol):
+    """What the routes ask of the monitor (:class:`~.service.Monitor` is one)."""
+
+    def status(self) -> dict[str, Any]: ...
+
+    def stale_rigs(self) -> list[str]: ...
+
+    def events(
+        self, limit: int = 100, rig: str | None = None, before_id: int | None = None
+    ) -> list[dict[str, Any]]: ...
+
+    def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]: ...
 
 INSTALL = "the monitor's HTTP server needs the monitor extra: pip install 'thermodepth[monitor]'"
 
