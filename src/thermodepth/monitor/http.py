@@ -50,6 +50,7 @@ class Monitor(Protocol):
 
     def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]: ...
 
+
 INSTALL = "the monitor's HTTP server needs the monitor extra: pip install 'thermodepth[monitor]'"
 
 
