@@ -255,6 +255,12 @@ def test_shutter_frame_and_bad_counts_keep_the_stream_going() -> None:
     assert "beyond the 14-bit range" in told[0]
     assert np.isnan(f.temp_depth_c).all()
     assert f.rois[0].n == 0 and f.rois[0].flags & PixelFlag.BAD_COUNTS  # says why it is empty
+    # a corrupt frame (random values: a quarter of them look like counts) is not trusted
+    noise = np.random.default_rng(3).integers(0, 65536, (120, 160), dtype=np.uint16)
+    f = Pipeline(Settings(hotspots=HotspotSettings(threshold_c=30.0)), rig.calibration,
+                 warn=told.append).process(replace(pair, thermal=noise))  # fmt: skip
+    assert np.isnan(f.temp_thermal_c).all() and not f.hotspots and not f.events
+    assert np.all(f.flags_thermal & PixelFlag.BAD_COUNTS)
     good = pipe.process(rig.frame())
     assert np.isfinite(good.temp_thermal_c).mean() > 0.99
 

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .compensation import CompensationModel, apply_to_table, by_vox
-from .plotting import distinct_styles, pyplot, save_figure
+from .plotting import distinct_styles, pyplot, save_figure, temperature_rgb
 from .registration import Reason
 from .sweep import SweepTable
 
@@ -132,6 +132,8 @@ def plot_overlay(
     not cover the box, and a colour bar. ``vmin_c``/``vmax_c``: the colour scale (C); give
     them for every image of a run or a report (:func:`display_range_c`), so that a colour
     means one temperature throughout; None: this frame's own (:func:`display_range_c`)."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
     from matplotlib.patches import Patch, Rectangle
 
     from .measure import hotspot_box_on_depth
@@ -140,25 +142,29 @@ def plot_overlay(
     cal = frame.calibration
     h, w = cal.depth.shape
     fig, ax = plt.subplots(figsize=(w / 100 + 1.6, h / 100 + 0.9), dpi=100)
+    # the layers composited here, as matplotlib's alpha would, and drawn as one image: one
+    # resampling instead of three (a 1280x720 overlay in about half the time)
     if frame.ir is not None:
-        ax.imshow(frame.ir, cmap="gray", vmin=0, vmax=255)
+        grey = frame.ir.astype(np.float32) / 255.0
     else:  # near is light, far is dark
         z = frame.depth_m
         lo, hi = np.nanpercentile(z, [2, 98]) if np.isfinite(z).any() else (0.0, 1.0)
-        ax.imshow(
-            np.nan_to_num((hi - z) / max(hi - lo, 1e-6), nan=0.0), cmap="gray", vmin=0, vmax=1
-        )
-    tint = np.zeros((h, w, 4))
-    for reason, _, rgb in NO_TEMPERATURE:
-        tint[frame.reason_depth == reason] = (*rgb, 0.55)
-    ax.imshow(tint)
+        grey = np.clip(np.nan_to_num((hi - z) / max(hi - lo, 1e-6), nan=0.0), 0.0, 1.0)
+    rgb = np.repeat(grey[..., None], 3, axis=-1).astype(np.float32)
+    for reason, _, tint in NO_TEMPERATURE:
+        where = frame.reason_depth == reason
+        rgb[where] = 0.45 * rgb[where] + 0.55 * np.asarray(tint, np.float32)
     t = frame.temp_depth_c
     lo_c, hi_c = vmin_c, vmax_c
     if lo_c is None or hi_c is None:  # a percentile of the whole image: only when needed
         auto_lo, auto_hi = display_range_c(t)
         lo_c = auto_lo if lo_c is None else lo_c
         hi_c = auto_hi if hi_c is None else hi_c
-    im = ax.imshow(np.ma.masked_invalid(t), cmap="inferno", vmin=lo_c, vmax=hi_c, alpha=0.7)
+    seen = np.isfinite(t)
+    colours = temperature_rgb(t[seen], (lo_c, hi_c)).astype(np.float32) / 255.0
+    rgb[seen] = 0.3 * rgb[seen] + 0.7 * colours
+    ax.imshow(rgb, interpolation="nearest")
+    im = ScalarMappable(Normalize(lo_c, hi_c), "inferno")
     for hs in frame.hotspots:
         box = hotspot_box_on_depth(
             hs, frame.z_thermal_m, cal.thermal, cal.depth, cal.thermal_from_depth

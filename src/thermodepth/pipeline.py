@@ -509,18 +509,25 @@ class Pipeline:
 
     def radiometry_of(self, pair: FramePair) -> Radiometry:
         """The radiometry of a pair's thermal values (their kind: the telemetry's, else the
-        calibration's). The first frame most of whose values cannot be of that kind is told
-        through ``warn`` (ThermalOutput.problem)."""
+        calibration's)."""
         output = thermal_output(pair.telemetry, self.calibration.thermal_output)
-        if not (self._kind_told or pair.telemetry.in_ffc):
-            why = output.problem(pair.thermal)
-            if why is not None:
-                self._kind_told = True
-                self.warn(
-                    f"frame {pair.index}: {why} (its pixels are NaN, flagged bad_counts; "
-                    "later such frames are not told)"
-                )
         return self.radiometry.with_output(output)
+
+    def corrupt(self, pair: FramePair, radiometry: Radiometry) -> bool:
+        """Whether most of a pair's values cannot be of their kind
+        (:meth:`~thermodepth.radiometry.ThermalOutput.problem`: a corrupt frame, or a camera
+        that sends another kind than stated): then none of its values is trusted. The first
+        such frame is told through ``warn``."""
+        if pair.telemetry.in_ffc:
+            return False
+        why = radiometry.output.problem(pair.thermal)
+        if why is not None and not self._kind_told:
+            self._kind_told = True
+            self.warn(
+                f"frame {pair.index}: {why} (its pixels are NaN, flagged bad_counts; later "
+                "such frames are not told)"
+            )
+        return why is not None
 
     def temperatures(
         self,
@@ -560,9 +567,12 @@ class Pipeline:
             fallback = s.fallback_distance_m or (float(np.median(known)) if known.size else 1.0)
             distance = np.where(missing, np.float32(fallback), distance)
         vox_c = pair.telemetry.fpa_temp_c
-        if pair.telemetry.in_ffc:
+        if pair.telemetry.in_ffc or self.corrupt(pair, radiometry):
+            # the shutter's image, or values mostly of no temperature: the few that look
+            # like one are not trusted either (random values would make hotspots)
+            why = PixelFlag.SHUTTER if pair.telemetry.in_ffc else PixelFlag.BAD_COUNTS
             temp = np.full(pair.thermal.shape, np.nan, np.float32)
-            flags = np.full(pair.thermal.shape, PixelFlag.SHUTTER, np.uint8)
+            flags = np.full(pair.thermal.shape, why, np.uint8)
         else:
             temp, flags = self.temperatures(pair.thermal, vox_c, distance, radiometry)
         flags |= np.where(missing, np.uint8(PixelFlag.NO_DISTANCE), np.uint8(0))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -41,8 +41,9 @@ class RigStatus:
     """A rig's figures, as ``/api/status`` and ``/metrics`` show them: ``state``
     (``starting``, ``running``, ``reopening``, ``ended``, ``stopped``), frames fused, when the
     last one arrived (monotonic s), reconnects, stalls, seconds without data, pairs dropped,
-    the shutter (FFC) and VOx of the last frame, the pipeline's recent times (s), the last
-    error and what the last recovery did."""
+    the shutter (FFC) and VOx of the last frame, the pipeline's recent times (s), how late a
+    paced source's recent pairs were reached (s), the last error and what the last recovery
+    did."""
 
     name: str
     location: str | None
@@ -61,6 +62,7 @@ class RigStatus:
     vox_temp_c: float = float("nan")
     frozen_since_mono: float | None = None
     pipeline_s: deque[float] = field(default_factory=lambda: deque(maxlen=200))
+    lag_s: deque[float] = field(default_factory=lambda: deque(maxlen=200))
     arrivals: deque[float] = field(default_factory=lambda: deque(maxlen=600))
     last_error: str | None = None
     last_recovery: str | None = None
@@ -82,7 +84,6 @@ class RigStatus:
         return (len(recent) - 1) / max(recent[-1] - recent[0], 1e-6)
 
     def as_dict(self, now_mono: float) -> dict[str, Any]:
-        ms = sorted(self.pipeline_s)
         return {
             "name": self.name,
             "location": self.location,
@@ -98,14 +99,25 @@ class RigStatus:
             "dropped": self.dropped,
             "ffc": self.in_ffc,
             "vox_temp_c": None if np.isnan(self.vox_temp_c) else round(self.vox_temp_c, 3),
-            "pipeline_ms": {
-                "median": round(1e3 * ms[len(ms) // 2], 2) if ms else None,
-                "p99": round(1e3 * ms[min(len(ms) - 1, int(0.99 * len(ms)))], 2) if ms else None,
-            },
+            "pipeline_ms": quantiles(self.pipeline_s, 1e3),
+            "pace_lag_ms": quantiles(self.lag_s, 1e3),
             "last_error": self.last_error,
             "last_recovery": self.last_recovery,
             "source_counters": dict(self.counters),
         }
+
+
+def quantiles(values: Iterable[float], scale: float = 1.0) -> dict[str, float | int | None]:
+    """Median and 99th percentile of recent values times ``scale`` (None: none yet), and
+    how many."""
+    v = sorted(values)
+    if not v:
+        return {"median": None, "p99": None, "n": 0}
+    return {
+        "median": round(scale * v[len(v) // 2], 4),
+        "p99": round(scale * v[min(len(v) - 1, int(0.99 * len(v)))], 4),
+        "n": len(v),
+    }
 
 
 def _shifted(event: StreamEvent, offset_s: float, index_offset: int) -> StreamEvent:
@@ -133,10 +145,16 @@ class PacedSource(Source):
     time), whose late pairs are dropped; else (a live camera, a recording replayed fast) as
     it is. Its frames are numbered on from
     ``index_from`` (a rig's numbers go on across reopenings; ``last_index`` is the last
-    pair's). ``close()`` may come from any thread (a stall) and ends the events at once."""
+    pair's); how late each paced pair was reached (s) goes into ``lags_s``. ``close()`` may
+    come from any thread (a stall) and ends the events at once."""
 
     def __init__(
-        self, inner: Source, replay: bool = False, paced: bool = False, index_from: int = 0
+        self,
+        inner: Source,
+        replay: bool = False,
+        paced: bool = False,
+        index_from: int = 0,
+        lags_s: deque[float] | None = None,
     ) -> None:
         self.inner, self.replay, self.paced = inner, replay, paced or replay
         for name in ("name", "paired_by", "streams", "calibration", "pairing", "files"):
@@ -144,6 +162,7 @@ class PacedSource(Source):
         self.device_depth = inner.device_depth
         self.live = inner.live or self.paced
         self.dropped = 0
+        self.lags_s = deque(maxlen=200) if lags_s is None else lags_s
         self.last_index = index_from - 1
         self._closed = threading.Event()
 
@@ -169,10 +188,13 @@ class PacedSource(Source):
                 if self._closed.is_set():
                     return
                 event = _shifted(event, offset_s, index_offset)
-                if isinstance(event, Match):
-                    if self.paced and time.time() - due > LATE_S:
+                if isinstance(event, Match) and self.paced:
+                    lag = time.time() - due
+                    if lag > LATE_S:
                         self.dropped += 1
                         continue
+                    self.lags_s.append(lag)
+                if isinstance(event, Match):
                     if last_due is not None and due > last_due:
                         step_s = due - last_due
                     last_due, self.last_index = due, event.pair.index

@@ -32,7 +32,7 @@ from .config import MONITOR, MonitorConfig, RigConfig
 from .evidence import Evidence
 from .failsafe import STORAGE_FAULT, Fault
 from .publish import MonitorPublisher
-from .rig import RigSink
+from .rig import RigSink, quantiles
 from .storage import CLIPS, Retention
 from .store import EventStore
 from .supervisor import AckRefusedError, RigRunner
@@ -47,18 +47,6 @@ STORE_NAME = "events.sqlite"
 def utc_of(time_s: float) -> str:
     """A Unix time as ISO 8601 UTC with milliseconds."""
     return datetime.fromtimestamp(time_s, timezone.utc).isoformat(timespec="milliseconds")
-
-
-def quantiles(values: deque[float]) -> dict[str, float | int | None]:
-    """Median and 99th percentile (s) of recent values, and how many."""
-    v = sorted(values)
-    if not v:
-        return {"median": None, "p99": None, "n": 0}
-    return {
-        "median": round(v[len(v) // 2], 4),
-        "p99": round(v[min(len(v) - 1, int(0.99 * len(v)))], 4),
-        "n": len(v),
-    }
 
 
 class Monitor:

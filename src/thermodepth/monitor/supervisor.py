@@ -115,7 +115,7 @@ class RigRunner:
             depth_mode=c.depth_mode,
         )
         index_from = 0 if self.source is None else self.source.last_index + 1
-        source = PacedSource(inner, self.replay, self.paced, index_from)
+        source = PacedSource(inner, self.replay, self.paced, index_from, self.status.lag_s)
         try:
             source.require_pairs()
             if self.pipeline is None:
