@@ -16,6 +16,7 @@ BENCHMARKS = [
     "bench_codecs",
     "bench_batch",
     "bench_detection",
+    "bench_monitor",
 ]
 
 

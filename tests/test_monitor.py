@@ -237,7 +237,8 @@ def test_status_and_events_over_http(seen: Seen) -> None:
     events = seen.http["events"]
     ids = [e["id"] for e in events]
     assert ids == sorted(ids, reverse=True)  # newest first
-    assert {"rig", "rule", "level", "event", "time_s", "time_utc"} <= set(events[0])
+    assert {"rig", "rule", "level", "state", "time_s", "time_utc"} <= set(events[0])
+    assert {e["state"] for e in events} >= {"alarm", "clear", "acknowledged"}
     page = seen.http["page"]
     assert len(page) == 5 and {e["rig"] for e in page} == {"a"}
     assert seen.http["bad_limit"].status_code == 400

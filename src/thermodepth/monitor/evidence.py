@@ -254,20 +254,19 @@ class Evidence:
         self,
         rig: str,
         event: dict[str, Any],
-        fused: FusedFrame,
+        now_s: float,
         context: RunContext,
         before: PreTrigger,
-        range_c: tuple[float, float] | None,
-    ) -> str:
-        """The clip of a raising event (a new one, or the rig's open clip extended); its
-        pictures are queued. Returns the clip's id (``RIG/STAMP-RULE``)."""
-        now_s = fused.thermal_time_s
-        _ = fused.on_depth  # sampled on the rig's thread: the registration is not shared
+    ) -> tuple[Clip, bool]:
+        """The clip of a raising event at ``now_s`` (its frame's thermal time, s): a new one
+        (True), or the rig's open clip extended (False). Cheap: the clip is written on its
+        own thread, and its picture is :meth:`draw`'s."""
         with self._lock:
             clip = self.open.get(rig)
             if clip is not None and now_s + self.post_s - clip.started_s > self.max_s:
                 self._end(rig)  # long enough: it ends here, a new one begins
                 clip = None
+            new = clip is None
             if clip is None:
                 folder = fresh_path(self.root / rig, f"{stamp(time.time())}-{event['rule']}")
                 first = [p for p in before.snapshot() if p.thermal_time_s >= now_s - self.pre_s]
@@ -280,18 +279,20 @@ class Evidence:
                     self.on_fault,
                 )
                 self.open[rig] = clip
-                self._picture(fused, clip, event, range_c)
             clip.until_s = max(clip.until_s, now_s + self.post_s)
             clip.events.append(event)
-            return clip.id
+            return clip, new
 
-    def _picture(
+    def draw(
         self,
         fused: FusedFrame,
         clip: Clip,
         event: dict[str, Any],
         range_c: tuple[float, float] | None,
     ) -> None:
+        """Queue the overlay and point cloud of the frame that began ``clip`` (its depth grid
+        sampled here, on the rig's thread: the registration is not shared)."""
+        _ = fused.on_depth
         title = (
             f"{clip.id}: {event['event'].upper()} {event['rule']}, frame {fused.index}, "
             f"VOx {fused.vox_label}"

@@ -68,6 +68,9 @@ class RigStatus:
     last_recovery: str | None = None
     counters: dict[str, int] = field(default_factory=dict)
 
+    def count_drop(self) -> None:
+        self.dropped += 1
+
     def age_s(self, now_mono: float) -> float:
         """Seconds since the last frame (since the rig started, before its first)."""
         return now_mono - (self.last_frame_mono or self.started_mono)
@@ -145,8 +148,9 @@ class PacedSource(Source):
     time), whose late pairs are dropped; else (a live camera, a recording replayed fast) as
     it is. Its frames are numbered on from
     ``index_from`` (a rig's numbers go on across reopenings; ``last_index`` is the last
-    pair's); how late each paced pair was reached (s) goes into ``lags_s``. ``close()`` may
-    come from any thread (a stall) and ends the events at once."""
+    pair's); how late each paced pair was reached (s) goes into ``lags_s``, and each pair
+    dropped is told to ``on_drop``. ``close()`` may come from any thread (a stall) and ends
+    the events at once."""
 
     def __init__(
         self,
@@ -155,6 +159,7 @@ class PacedSource(Source):
         paced: bool = False,
         index_from: int = 0,
         lags_s: deque[float] | None = None,
+        on_drop: Callable[[], None] | None = None,
     ) -> None:
         self.inner, self.replay, self.paced = inner, replay, paced or replay
         for name in ("name", "paired_by", "streams", "calibration", "pairing", "files"):
@@ -163,6 +168,7 @@ class PacedSource(Source):
         self.live = inner.live or self.paced
         self.dropped = 0
         self.lags_s = deque(maxlen=200) if lags_s is None else lags_s
+        self.on_drop = on_drop or (lambda: None)
         self.last_index = index_from - 1
         self._closed = threading.Event()
 
@@ -192,6 +198,7 @@ class PacedSource(Source):
                     lag = time.time() - due
                     if lag > LATE_S:
                         self.dropped += 1
+                        self.on_drop()
                         continue
                     self.lags_s.append(lag)
                 if isinstance(event, Match):

@@ -249,25 +249,29 @@ class Monitor:
     # -- events --------------------------------------------------------------------------------
 
     def emit(self, sink: RigSink, events: list[dict[str, Any]], fused: FusedFrame | None) -> None:
-        """A rig's events (module docstring): clip, row, outbox, line."""
+        """A rig's events (module docstring): clip, row, outbox, line; then the picture of a
+        new clip (the slow part, after the alarm is out)."""
         runner = self.runners.get(sink.name)
         for event in events:
             event = {**event, "rig": sink.name}
             if runner is not None and runner.config.location:
                 event["location"] = runner.config.location
-            captured = None
+            captured, drawn = None, None
             if fused is not None:
-                event["vox_temp_c"] = (
-                    None if fused.vox_temp_c != fused.vox_temp_c else round(fused.vox_temp_c, 3)
-                )
+                vox = fused.vox_temp_c
+                event["vox_temp_c"] = None if vox != vox else round(vox, 3)
                 if runner is not None and runner.wall_clock:
                     captured = fused.thermal_time_s
                 if event["event"] in RAISED and sink.context is not None:
-                    fixed = runner.settings.viewer.fixed_range_c if runner else None
-                    event["clip"] = self.evidence.trigger(
-                        sink.name, event, fused, sink.context, sink.pre, fixed
+                    clip, new = self.evidence.trigger(
+                        sink.name, event, fused.thermal_time_s, sink.context, sink.pre
                     )
+                    event["clip"] = clip.id
+                    drawn = clip if new else None
             self.record(event, captured, runner is None or runner.wall_clock)
+            if drawn is not None and fused is not None:
+                fixed = runner.settings.viewer.fixed_range_c if runner else None
+                self.evidence.draw(fused, drawn, event, fixed)
 
     def record(
         self, event: dict[str, Any], captured_s: float | None = None, unix_time: bool = True
@@ -277,6 +281,7 @@ class Monitor:
         Unix time (a rig on a live clock; else it is stamped with now)."""
         time_s = event.get("time_s")
         event["time_utc"] = utc_of(time_s if unix_time and time_s else time.time())
+        event["state"] = event["event"]  # the lifecycle's word for it, as the store's column
         why = None
         with self._lock:
             self.event_counts[(event["rig"], event["event"])] += 1

@@ -115,7 +115,9 @@ class RigRunner:
             depth_mode=c.depth_mode,
         )
         index_from = 0 if self.source is None else self.source.last_index + 1
-        source = PacedSource(inner, self.replay, self.paced, index_from, self.status.lag_s)
+        source = PacedSource(
+            inner, self.replay, self.paced, index_from, self.status.lag_s, self.status.count_drop
+        )
         try:
             source.require_pairs()
             if self.pipeline is None:
@@ -169,8 +171,6 @@ class RigRunner:
             self.status.last_error = f"{type(exc).__name__}: {exc}"
             self.log(f"{self.name}: unexpected error\n{traceback.format_exc().rstrip()}")
             return self.status.last_error
-        finally:
-            self.status.dropped += source.dropped
         if result.error:
             return f"{result.stopped}: {result.error}"
         return result.stopped
