@@ -119,9 +119,13 @@ def main() -> None:
     finally:
         if broker is not None:
             broker.cleanup()
-    table = Table(title="monitor: alarm latency from a thermal frame's capture (ms)")
-    for col in ("rigs", "to row median", "p99", "to broker median", "p99", "events",
-                "pairs/s", "dropped", "pace lag p99", "pipeline", "CPU cores"):  # fmt: skip
+    table = Table(
+        title="monitor: from a thermal frame's capture to its event's row and to the broker "
+        "(median, p99 ms); pairs dropped, how late pairs were reached (p99 ms), pipeline "
+        "(median ms), CPU"
+    )
+    for col in ("rigs", "row", "row p99", "broker", "broker p99", "events", "pairs/s",
+                "dropped", "lag p99", "pipeline", "cores"):  # fmt: skip
         table.add_column(col, justify="right")
     for r in results:
         row, broker_fig = r["latency_s"]["event_row"], r["latency_s"]["broker"]
