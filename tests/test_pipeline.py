@@ -17,7 +17,7 @@ from thermodepth.cli import app
 from thermodepth.compensation import Flag, PaperModel, save_model
 from thermodepth.errors import InputError
 from thermodepth.evaluation import Generalisation
-from thermodepth.figures import plot_overlay
+from thermodepth.figures import overlay_rgb, plot_overlay
 from thermodepth.frames import FramePair
 from thermodepth.io.pointcloud import read_ply, write_ply
 from thermodepth.measure import hotspot_box_on_depth, roi_stats
@@ -404,6 +404,27 @@ def test_point_cloud_and_overlay(tmp_path: Path) -> None:
     img = cv2.imread(str(png))
     assert img.shape[0] > 700 and img.shape[1] > 1280
     assert img.std() > 10  # not blank
+
+
+def test_pixels_without_a_temperature_never_look_like_one() -> None:
+    from matplotlib import colormaps
+
+    rig = inspection_rig(1.0)
+    frame = Pipeline(Settings(), rig.calibration).process(rig.frame())
+    rgb = overlay_rgb(frame, (20.0, 70.0))
+    inferno = colormaps["inferno"](np.linspace(0, 1, 256))[:, :3]
+    assert np.all(inferno[:, 1] <= inferno[:, 0] + 0.015)  # its green never leads its red
+    reason = frame.reason_depth
+    hidden = rgb[reason == Reason.OCCLUDED]
+    no_depth = rgb[reason == Reason.INVALID_DEPTH]
+    outside = rgb[reason == Reason.OUTSIDE]
+    assert len(hidden) > 1000 and len(no_depth) > 1000 and len(outside) > 1000
+    # hidden: green stripes on half of it; no depth: teal; outside: light neutral grey
+    assert 0.4 < np.mean(hidden[:, 1] > hidden[:, 0] + 0.2) < 0.6
+    assert np.all(no_depth[:, 1] > no_depth[:, 0] + 0.2)
+    assert np.all(np.ptp(outside, axis=1) < 1e-6) and outside.min() >= 0.5
+    seen = rgb[reason == Reason.OK]
+    assert np.all(seen[:, 1] <= seen[:, 0] + 0.015)  # a temperature over grey: never green
 
 
 def test_run_live_with_record_then_replay_gives_the_same_results(tmp_path: Path) -> None:
