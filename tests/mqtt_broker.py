@@ -100,6 +100,15 @@ class Broker:
         return f"mqtt://rig@127.0.0.1:{self.port}/{prefix}"
 
 
+def payload_of(payload: bytes) -> Any:
+    """A message's JSON, or its text where it is none (Home Assistant's ``online``, an empty
+    retained message that removes a discovery config)."""
+    try:
+        return json.loads(payload)
+    except ValueError:
+        return payload.decode("utf-8", errors="replace")
+
+
 class Collector:
     """A subscriber to ``topic`` (QoS 1) with a fixed client id and a persistent session, so
     that a broker with persistence keeps its messages across a restart; ready once the
@@ -116,7 +125,7 @@ class Collector:
         c.on_connect = lambda cl, ud, fl, rc, pr: cl.subscribe(topic, qos=1)
         c.on_subscribe = lambda cl, ud, mid, rcs, pr: self._subscribed.set()
         c.on_message = lambda cl, ud, m: self.messages.put(
-            (m.topic, json.loads(m.payload), bool(m.retain))
+            (m.topic, payload_of(m.payload), bool(m.retain))
         )
         c.connect("127.0.0.1", broker.port, keepalive=5)
         c.loop_start()

@@ -14,7 +14,7 @@ pytest.importorskip("paho.mqtt.client", reason="the monitor's MQTT needs the mqt
 
 import paho.mqtt.client as mqtt
 
-from monitor_helpers import monitor_config, settings_file, wait_for
+from monitor_helpers import FLAPPING, monitor_config, settings_file, wait_for
 from mqtt_broker import Broker, Collector, missing
 from thermodepth.errors import InputError
 from thermodepth.monitor import Monitor, load_config
@@ -181,3 +181,126 @@ def test_a_wrong_password_refuses_to_start(
         monitor.start()
     monitor.stop()  # what started is stopped
     assert not monitor.runners["a"].thread.is_alive()
+
+
+ROIS = """\
+rois:
+  - {name: plate, rect: [560, 280, 720, 440]}
+  - {name: "wall top", rect: [0, 0, 1280, 100]}
+"""
+
+
+def render(template: str, payload: Any) -> str:
+    """A Home Assistant value_template rendered as Home Assistant renders it (Jinja2, the
+    payload as ``value_json``)."""
+    import jinja2
+
+    return jinja2.Environment().from_string(template).render(value_json=payload).strip()
+
+
+def test_home_assistant_discovery(
+    broker: Broker, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv(PASSWORD_ENV, broker.password)
+    settings_file(tmp_path, FLAPPING + ROIS)
+    discovery = Collector(broker, "homeassistant/#", client_id="ha")
+    states = Collector(broker, "plant/#", client_id="states")
+    rigs = [{"name": "a", "source": "sim", "location": "Hall 2"},
+            {"name": "b", "source": "sim:thermal=lepton3.5"}]  # fmt: skip
+    path = monitor_config(tmp_path, [{**r, "settings": "s.yaml"} for r in rigs],
+                          http={"listen": None},
+                          mqtt={"url": broker.url("plant"), "homeassistant": True})  # fmt: skip
+    monitor = Monitor(load_config(path), lambda line: None)
+    monitor.start()
+    try:
+        wait_for(lambda: monitor.store.count() >= 6, 15)
+        time.sleep(1.5)
+        first = discovery.drain(settle_s=0.5)
+        # Home Assistant restarts and says so: every config again
+        ha = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="home-assistant")
+        ha.username_pw_set("rig", broker.password)
+        ha.connect("127.0.0.1", broker.port)
+        ha.loop_start()
+        ha.publish("homeassistant/status", "online", qos=1).wait_for_publish(5)
+        again = discovery.drain(settle_s=1.0)
+        ha.disconnect()
+        ha.loop_stop()
+        seen = states.drain(settle_s=0.5)
+    finally:
+        monitor.stop()
+    discovery.close()
+    states.close()
+    configs = {t: m for t, m, _ in first}
+    node = "thermodepth_plant"
+    want = {
+        f"homeassistant/sensor/{node}/{rig}_{what}/config"
+        for rig in "ab"
+        for what in ("hottest", "roi_plate", "roi_wall_top")
+    } | {
+        f"homeassistant/binary_sensor/{node}/{rig}_{what}/config"
+        for rig in "ab"
+        for what in ("alarm_hot", "alarm_latched", "health")
+    }
+    assert set(configs) == want
+    assert {t for t, _, _ in again if t.endswith("/config")} == want  # again, at its birth
+    hottest = configs[f"homeassistant/sensor/{node}/a_hottest/config"]
+    assert hottest["device_class"] == "temperature" and hottest["unit_of_measurement"] == "°C"
+    assert hottest["state_class"] == "measurement"
+    assert hottest["device"]["identifiers"] == ["thermodepth_plant_a"]
+    assert hottest["device"]["suggested_area"] == "Hall 2"
+    assert hottest["unique_id"] == "thermodepth_plant_a_hottest"
+    for config in configs.values():  # what Home Assistant needs of every entity
+        assert {"name", "unique_id", "state_topic", "device", "availability"} <= set(config)
+    heat = configs[f"homeassistant/binary_sensor/{node}/b_alarm_latched/config"]
+    assert heat["device_class"] == "heat" and heat["state_topic"] == "plant/b/alarm_states"
+    health = configs[f"homeassistant/binary_sensor/{node}/a_health/config"]
+    assert health["device_class"] == "problem"
+    # the states follow the rigs, read through the configs' own templates
+    last = {t: m for t, m, _ in seen}
+    measured = last["plant/a/measurements"]
+    assert float(render(hottest["value_template"], measured)) == pytest.approx(
+        measured["hottest"]["max_c"]
+    )
+    plate = configs[f"homeassistant/sensor/{node}/a_roi_plate/config"]
+    assert float(render(plate["value_template"], measured)) == pytest.approx(
+        measured["rois"]["plate"]["max_c"]
+    )
+    assert render(heat["value_template"], last["plant/b/alarm_states"]) == "ON"  # latched
+    assert render(health["value_template"], last["plant/a/status"]) == "OFF"  # healthy
+    available = [render(a["value_template"], last[a["topic"]]) for a in hottest["availability"]]
+    assert available == ["online", "online"]
+    gone = render(hottest["availability"][0]["value_template"], {"state": "died"})
+    assert gone == "offline"  # the monitor's last will makes every entity unavailable
+
+
+def test_home_assistant_entities_that_leave_the_config_are_removed(
+    broker: Broker, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv(PASSWORD_ENV, broker.password)
+    settings_file(tmp_path, FLAPPING)
+    mqtt_section = {"url": broker.url("plant"), "homeassistant": True}
+    both = monitor_config(tmp_path, [{"name": n, "source": "sim", "settings": "s.yaml"}
+                                     for n in "ab"], http={"listen": None},
+                          mqtt=mqtt_section)  # fmt: skip
+    first = Monitor(load_config(both), lambda line: None)
+    first.start()
+    time.sleep(1.0)
+    first.stop()
+    settings_file(tmp_path, "alarms:\n  - {name: hot, above_c: 67.48}\n")  # latched is gone
+    one = monitor_config(tmp_path, [{"name": "a", "source": "sim", "settings": "s.yaml"}],
+                         http={"listen": None}, mqtt=mqtt_section)  # fmt: skip
+    lines: list[str] = []
+    second = Monitor(load_config(one), lines.append)
+    second.start()
+    time.sleep(1.5)
+    second.stop()
+    retained = Collector(broker, "homeassistant/#", client_id="late")
+    kept = {t for t, m, _ in retained.drain(settle_s=0.5)}
+    retained.close()
+    node = "thermodepth_plant"
+    assert kept == {
+        f"homeassistant/sensor/{node}/a_hottest/config",
+        f"homeassistant/binary_sensor/{node}/a_alarm_hot/config",
+        f"homeassistant/binary_sensor/{node}/a_health/config",
+    }
+    assert sum("removed (no longer in the config)" in line for line in lines) == 5

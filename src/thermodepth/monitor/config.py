@@ -102,9 +102,13 @@ class HttpConfig(StrictSchema):
 
 class MqttConfig(MqttSettings):
     """The broker: ``url`` (``mqtt://[USER@]HOST[:PORT]/PREFIX``, as ``run --mqtt`` takes
-    it; each rig publishes under ``PREFIX/RIG/``) and the settings' ``mqtt`` keys."""
+    it; each rig publishes under ``PREFIX/RIG/``), the settings' ``mqtt`` keys, and
+    ``homeassistant`` (publish Home Assistant's discovery configs under
+    ``discovery_prefix``)."""
 
     url: str
+    homeassistant: bool = False
+    discovery_prefix: str = Field(default="homeassistant", pattern=r"^[^#+]+$")
 
 
 class FailsafeConfig(StrictSchema):

@@ -10,6 +10,8 @@ Topics under the URL's prefix ``P`` (``mqtt://broker/plant`` -> ``plant/line1/al
   ``measurements_hz`` a second.
 - ``P/RIG/status``: the rig's figures as ``/api/status`` gives them, retained, every
   :data:`STATUS_EVERY_S` and when its state changes.
+- ``P/RIG/alarm_states``: ``{"RULE": "ON" or "OFF", ...}``, retained, at start and at every
+  event of the rig.
 - ``P/RIG/ack``: acknowledge a raised alarm, ``{"rule": "hot", "by": "jane"}``; the answer on
   ``P/RIG/ack/result`` (``{"ok": true, "events": [...]}`` or ``{"ok": false, "error": ...}``).
 - ``P/monitor/alarms``: the monitor's own events (storage faults); ``P/monitor/status``:
@@ -29,6 +31,7 @@ from ..io.measurements import jsonable
 from ..pipeline import FusedFrame
 from ..sinks.mqtt import MqttConnection, MqttTarget, default_client_id, measurement_message
 from .config import MONITOR, MqttConfig
+from .homeassistant import Discovery, RigEntities
 from .store import EventStore
 from .supervisor import AckRefusedError
 
@@ -37,7 +40,8 @@ Acknowledge = Callable[[str, str, str], list[dict[str, Any]]]
 
 
 class MonitorPublisher:
-    """The monitor's broker connection (module docstring). ``acknowledge(rig, rule, by)``:
+    """The monitor's broker connection (module docstring), for the rigs of ``entities`` (and
+    their Home Assistant discovery when the config asks). ``acknowledge(rig, rule, by)``:
     what an acknowledge command does; ``published(event)``: told when the broker has an
     event; ``log``: one line each of what happens."""
 
@@ -45,12 +49,13 @@ class MonitorPublisher:
         self,
         config: MqttConfig,
         store: EventStore,
-        rigs: list[str],
+        entities: list[RigEntities],
         acknowledge: Acknowledge,
         published: Callable[[dict[str, Any]], None],
         log: Callable[[str], None],
     ) -> None:
-        self.config, self.store, self.rigs = config, store, rigs
+        self.config, self.store, self.entities = config, store, entities
+        self.rigs = [e.name for e in entities]
         self.acknowledge, self.published, self.log = acknowledge, published, log
         self.target = MqttTarget.parse(config.url)
         will = json.dumps({"state": "died"})
@@ -79,6 +84,9 @@ class MonitorPublisher:
         self._status(MONITOR, {"state": "running", "rigs": self.rigs, "since_utc": utc_now()})
         for rig in self.rigs:
             self.connection.subscribe(self.topic(rig, "ack"), self._ack_command)
+        if self.config.homeassistant:
+            prefix, where = self.target.prefix, self.config.discovery_prefix
+            Discovery(self.connection, prefix, where, self.entities, self.log).start()
         self._thread.start()
 
     def _status(self, rig: str, status: dict[str, Any]) -> None:
@@ -88,6 +96,10 @@ class MonitorPublisher:
     def rig_status(self, rig: str, status: dict[str, Any]) -> None:
         """A rig's figures, retained."""
         self._status(rig, status)
+
+    def alarm_states(self, rig: str, states: dict[str, str]) -> None:
+        """Whether each alarm rule of a rig is raised (``ON``) or not (``OFF``), retained."""
+        self.connection.publish(self.topic(rig, "alarm_states"), json.dumps(states), 1, True)
 
     def wake(self) -> None:
         """New rows in the outbox."""

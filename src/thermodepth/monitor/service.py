@@ -31,6 +31,7 @@ from ..pipeline import FusedFrame
 from .config import MONITOR, MonitorConfig, RigConfig
 from .evidence import Evidence
 from .failsafe import STORAGE_FAULT, Fault
+from .homeassistant import RigEntities
 from .publish import MonitorPublisher
 from .rig import RigSink, quantiles
 from .storage import CLIPS, Retention
@@ -84,18 +85,46 @@ class Monitor:
         )
         self.runners = {rig.name: self._runner(rig) for rig in config.rigs}
         self.retention = Retention(s, self._busy, self.store.clip_deleted)
-        self.publisher = (
-            MonitorPublisher(
-                config.mqtt,
-                self.store,
-                list(self.runners),
-                self.acknowledge,
-                self._published,
-                self.log,
-            )
-            if config.mqtt is not None
-            else None
+        self.publisher = self._publisher()
+
+    def _publisher(self) -> MonitorPublisher | None:
+        """The broker's part for the config and rigs now (None: no broker)."""
+        if self.config.mqtt is None:
+            return None
+        return MonitorPublisher(
+            self.config.mqtt,
+            self.store,
+            self.entities(),
+            self.acknowledge,
+            self._published,
+            self.log,
         )
+
+    def entities(self) -> list[RigEntities]:
+        """What each rig shows a plant's systems: its ROIs and alarm rules."""
+        return [
+            RigEntities(
+                r.name,
+                r.config.location,
+                [roi.name for roi in r.settings.rois],
+                [a.name for a in r.settings.alarms],
+            )
+            for r in self.runners.values()
+        ]
+
+    def _start_publisher(self) -> None:
+        """Connect to the broker and tell it every rig's alarm states."""
+        if self.publisher is None:
+            return
+        self.publisher.start()
+        for runner in self.runners.values():
+            self._alarm_states(runner)
+
+    def _alarm_states(self, runner: RigRunner) -> None:
+        if self.publisher is not None:
+            raised = {a["rule"] for a in runner.raised()}
+            states = {a.name: "ON" if a.name in raised else "OFF" for a in runner.settings.alarms}
+            self.publisher.alarm_states(runner.name, states)
 
     def _runner(self, rig: RigConfig, config: MonitorConfig | None = None) -> RigRunner:
         c = config or self.config
@@ -125,8 +154,7 @@ class Monitor:
     def start(self) -> None:
         """Start every part: the broker first and the HTTP server (either may refuse with
         one InputError line: nothing else has started), then the rigs and the clock."""
-        if self.publisher is not None:
-            self.publisher.start()
+        self._start_publisher()
         if self.config.http.listen is not None:
             from .http import HttpServer
 
@@ -202,17 +230,10 @@ class Monitor:
                 runner.start()
                 self.log(f"{rig.name}: started (reload)")
         self.config = config
-        if self.publisher is not None and set(self.publisher.rigs) != set(self.runners):
+        if self.publisher is not None and self.publisher.entities != self.entities():
             self.publisher.stop("reloading")
-            self.publisher = MonitorPublisher(
-                config.mqtt,  # type: ignore[arg-type]
-                self.store,
-                list(self.runners),
-                self.acknowledge,
-                self._published,
-                self.log,
-            )
-            self.publisher.start()
+            self.publisher = self._publisher()
+            self._start_publisher()
 
     def _unchanged(self, rig: Any) -> bool:
         runner = self.runners.get(rig.name)
@@ -272,6 +293,8 @@ class Monitor:
             if drawn is not None and fused is not None:
                 fixed = runner.settings.viewer.fixed_range_c if runner else None
                 self.evidence.draw(fused, drawn, event, fixed)
+        if runner is not None:
+            self._alarm_states(runner)
 
     def record(
         self, event: dict[str, Any], captured_s: float | None = None, unix_time: bool = True
@@ -426,6 +449,7 @@ class Monitor:
             d = r.status.as_dict(now)
             d["up"] = int(r.name not in stale)
             d["active_alarms"] = r.raised()
+            d["health"] = "stale" if r.name in stale else "fault" if r.watch.raised else "ok"
             rigs.append(d)
         path = self.config.storage.path
         try:

@@ -261,9 +261,11 @@ class MqttConnection:
             on_ack()
 
     def _on_message(self, client: Any, userdata: Any, message: Any) -> None:
-        handler = self._handlers.get(message.topic)
-        if handler is not None:
-            handler(message.topic, bytes(message.payload))
+        import paho.mqtt.client as mqtt
+
+        for pattern, handler in list(self._handlers.items()):
+            if mqtt.topic_matches_sub(pattern, message.topic):
+                handler(message.topic, bytes(message.payload))
 
     # -- use ----------------------------------------------------------------------------------
 
@@ -298,7 +300,8 @@ class MqttConnection:
         return True
 
     def subscribe(self, topic: str, handler: Callable[[str, bytes], None]) -> None:
-        """Hand every message on ``topic`` to ``handler(topic, payload)`` (paho's thread)."""
+        """Hand every message on ``topic`` (wildcards allowed) to ``handler(topic, payload)``
+        (paho's thread)."""
         self._handlers[topic] = handler
         self.client.subscribe(topic, qos=1)
 
