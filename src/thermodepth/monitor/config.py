@@ -111,6 +111,37 @@ class MqttConfig(MqttSettings):
     discovery_prefix: str = Field(default="homeassistant", pattern=r"^[^#+]+$")
 
 
+Policy = Literal["none", "basic256sha256"]
+POLICIES: tuple[Policy, ...] = ("none", "basic256sha256")
+
+
+class OpcUaConfig(StrictSchema):
+    """The OPC UA server (:mod:`.opcua`): ``endpoint`` (``opc.tcp://HOST:PORT/PATH``),
+    ``namespace`` (its URI), ``anonymous`` (anonymous sessions allowed), ``users_file`` (a
+    YAML mapping of user names to passwords), ``security`` (the policies offered: ``none``,
+    ``basic256sha256``: sign and encrypt with the server's own certificate, made on first
+    start in ``certificate_dir``, default STORAGE/opcua), ``update_hz`` (measured values
+    written at most so often per rig)."""
+
+    endpoint: str = "opc.tcp://127.0.0.1:4840/thermodepth"
+    namespace: str = "urn:thermodepth:monitor"
+    anonymous: bool = False
+    users_file: Path | None = None
+    security: list[Policy] = Field(default_factory=lambda: list(POLICIES), min_length=1)
+    certificate_dir: Path | None = None
+    update_hz: float = Field(default=2.0, gt=0)
+
+    def address(self) -> tuple[str, int]:
+        """(host, port) of the endpoint; ValueError if it is not ``opc.tcp://HOST:PORT/...``."""
+        m = re.match(r"^opc\.tcp://([^/:]+|\[[^\]]+\]):(\d+)(/.*)?$", self.endpoint)
+        if m is None or not 0 < int(m.group(2)) < 65536:
+            raise ValueError(
+                f"endpoint: {self.endpoint!r}: expected opc.tcp://HOST:PORT/PATH "
+                "(opc.tcp://127.0.0.1:4840/thermodepth)"
+            )
+        return m.group(1).strip("[]"), int(m.group(2))
+
+
 class FailsafeConfig(StrictSchema):
     """When a rig's data cannot be trusted (a ``sensor_fault``): ``vox_margin_c`` beyond the
     VOx range its compensation was fitted on; the shutter closed ``shutter_max_s`` on end, or
@@ -136,6 +167,7 @@ class MonitorConfig(StrictSchema):
     storage: StorageConfig
     http: HttpConfig = HttpConfig()
     mqtt: MqttConfig | None = None
+    opcua: OpcUaConfig | None = None
     failsafe: FailsafeConfig = FailsafeConfig()
 
 
@@ -166,6 +198,13 @@ def _resolved(config: MonitorConfig, base: Path) -> MonitorConfig:
             update={"token_file": _relative(base, config.http.token_file)}
         ),
     }
+    if config.opcua is not None:
+        update["opcua"] = config.opcua.model_copy(
+            update={
+                "users_file": _relative(base, config.opcua.users_file),
+                "certificate_dir": _relative(base, config.opcua.certificate_dir),
+            }
+        )
     if config.mqtt is not None:
         update["mqtt"] = config.mqtt.model_copy(
             update={
@@ -232,6 +271,30 @@ def config_problems(config: MonitorConfig) -> list[str]:
             read_password(config.mqtt)
         except InputError as exc:
             problems.append(f"mqtt.password_file: {exc}")
+    problems.extend(_opcua_problems(config.opcua))
+    return problems
+
+
+def _opcua_problems(opcua: OpcUaConfig | None) -> list[str]:
+    """What is wrong with the OPC UA section: its endpoint, its users, who could connect."""
+    if opcua is None:
+        return []
+    from .opcua import read_users
+
+    problems = []
+    try:
+        opcua.address()
+    except ValueError as exc:
+        problems.append(f"opcua.{exc}")
+    if opcua.users_file is not None:
+        try:
+            read_users(opcua.users_file)
+        except InputError as exc:
+            problems.append(f"opcua.users_file: {exc}")
+    elif not opcua.anonymous:
+        problems.append(
+            "opcua: nobody could connect: give users_file (user: password), or anonymous: true"
+        )
     return problems
 
 

@@ -30,8 +30,9 @@ from ..io.measurements import jsonable
 from ..pipeline import FusedFrame
 from .config import MONITOR, MonitorConfig, RigConfig
 from .evidence import Evidence
-from .failsafe import STORAGE_FAULT, Fault
+from .failsafe import SENSOR_FAULT, STORAGE_FAULT, Fault
 from .homeassistant import RigEntities
+from .opcua import OpcUaServer
 from .publish import MonitorPublisher
 from .rig import RigSink, quantiles
 from .storage import CLIPS, Retention
@@ -86,6 +87,13 @@ class Monitor:
         self.runners = {rig.name: self._runner(rig) for rig in config.rigs}
         self.retention = Retention(s, self._busy, self.store.clip_deleted)
         self.publisher = self._publisher()
+        self.opcua = self._opcua()
+
+    def _opcua(self) -> OpcUaServer | None:
+        """The OPC UA server for the config and rigs now (None: none asked for)."""
+        if self.config.opcua is None:
+            return None
+        return OpcUaServer(self.config.opcua, self.entities(), self.config.storage.path, self.log)
 
     def _publisher(self) -> MonitorPublisher | None:
         """The broker's part for the config and rigs now (None: no broker)."""
@@ -111,6 +119,29 @@ class Monitor:
             )
             for r in self.runners.values()
         ]
+
+    def _start_outputs(self) -> None:
+        started: list[Any] = []
+        try:
+            self._start_publisher()
+            started.append(self.publisher)
+            if self.config.http.listen is not None:
+                from .http import HttpServer
+
+                self.http = HttpServer(self, self.config.http)
+                self.http.start()
+                started.append(self.http)
+                self.log(f"monitor: HTTP on {self.http.url}")
+            if self.opcua is not None:
+                self.opcua.start()
+                started.append(self.opcua)
+                self.log(f"monitor: OPC UA on {self.config.opcua.endpoint}")  # type: ignore[union-attr]
+        except BaseException:
+            for part in reversed(started):
+                if part is not None:
+                    part.stop()
+            self.publisher, self.http, self.opcua = None, None, None
+            raise
 
     def _start_publisher(self) -> None:
         """Connect to the broker and tell it every rig's alarm states."""
@@ -140,9 +171,12 @@ class Monitor:
         )
 
     def measured(self, sink: RigSink, fused: FusedFrame) -> None:
-        """A rig's fused frame: its summary to the broker (at its rate)."""
+        """A rig's fused frame: its summary to the broker, its readings to OPC UA (each at
+        its rate)."""
         if self.publisher is not None:
             self.publisher.measurement(sink.name, fused)
+        if self.opcua is not None:
+            self.opcua.measured(sink.name, fused)
 
     def _busy(self) -> set[Any]:
         busy = self.evidence.active_folders()
@@ -152,20 +186,10 @@ class Monitor:
         return busy
 
     def start(self) -> None:
-        """Start every part: the broker first and the HTTP server (either may refuse with
-        one InputError line: nothing else has started), then the rigs and the clock."""
-        self._start_publisher()
-        if self.config.http.listen is not None:
-            from .http import HttpServer
-
-            self.http = HttpServer(self, self.config.http)
-            try:
-                self.http.start()
-            except BaseException:
-                if self.publisher is not None:
-                    self.publisher.stop()
-                raise
-            self.log(f"monitor: HTTP on {self.http.url}")
+        """Start every part: the broker, the HTTP and OPC UA servers first (each may refuse
+        with one InputError line: what had started is stopped, nothing else starts), then the
+        rigs and the clock."""
+        self._start_outputs()
         for runner in self.runners.values():
             runner.start()
         for target, name in ((self._clock, "monitor clock"), (self._sweeper, "storage")):
@@ -205,6 +229,8 @@ class Monitor:
             self.publisher.stop(reason)
         if self.http is not None:
             self.http.stop()
+        if self.opcua is not None:
+            self.opcua.stop()
 
     def reload(self, config: MonitorConfig) -> None:
         """Apply a new config while running: a rig changed (its entry or its settings
@@ -234,6 +260,10 @@ class Monitor:
             self.publisher.stop("reloading")
             self.publisher = self._publisher()
             self._start_publisher()
+        if self.opcua is not None and self.opcua.rigs != self.entities():
+            self.opcua.stop()
+            self.opcua = self._opcua()
+            self.opcua.start()  # type: ignore[union-attr]
 
     def _unchanged(self, rig: Any) -> bool:
         runner = self.runners.get(rig.name)
@@ -295,6 +325,12 @@ class Monitor:
                 self.evidence.draw(fused, drawn, event, fixed)
         if runner is not None:
             self._alarm_states(runner)
+            if self.opcua is not None:
+                raised = {a["rule"] for a in runner.raised()}
+                for event in events:
+                    rule = event["rule"]
+                    self.opcua.event({**event, "rig": sink.name},
+                                     None if rule == SENSOR_FAULT else rule in raised)  # fmt: skip
 
     def record(
         self, event: dict[str, Any], captured_s: float | None = None, unix_time: bool = True
@@ -370,7 +406,7 @@ class Monitor:
     def _clock(self) -> None:
         watchdog_s = watchdog_interval_s()
         last = time.monotonic()
-        last_dog = last_status = float("-inf")
+        last_dog = last_status = last_opcua = float("-inf")
         while not self._stop.wait(TICK_S):
             now = time.monotonic()
             dt, last = now - last, now
@@ -380,6 +416,12 @@ class Monitor:
             if watchdog_s is not None and now - last_dog >= watchdog_s and alive:
                 notify("WATCHDOG=1")
                 last_dog = now
+            if self.opcua is not None:
+                self.opcua.flush()
+                if now - last_opcua >= 1.0:
+                    last_opcua = now
+                    for r in self.status()["rigs"]:
+                        self.opcua.status(r)
             if self.publisher is not None and now - last_status >= STATUS_EVERY_S:
                 last_status = now
                 for r in self.status()["rigs"]:

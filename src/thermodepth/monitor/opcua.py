@@ -1,0 +1,341 @@
+"""The monitor as an OPC UA server (asyncua, on a thread and event loop of its own; the
+``opcua:`` section of the monitor's config), for a plant's SCADA and historians.
+
+Its namespace (``opcua.namespace``, default ``urn:thermodepth:monitor``) holds, under
+Objects, one object ``Thermodepth`` and in it one object per rig; node ids are strings in
+the namespace, the path joined by dots (``ns=2;s=line1.Rois.plate.Max``):
+
+===================================  =========================================================
+node                                 what
+===================================  =========================================================
+``RIG.Health``                       String: ``ok``, ``stale`` (no fresh data) or ``fault`` (a
+                                     sensor fault)
+``RIG.Up``                           Boolean: fresh data
+``RIG.FramesPerSecond``              Double
+``RIG.VoxTemperature``               Double, C: the thermal camera's sensor (NaN: not told)
+``RIG.Hottest``                      Double, C: the hottest hotspot's max (NaN: none)
+``RIG.Rois.ROI.Max`` / ``Mean`` /    Double, C: each ROI's statistics (NaN: no valid pixel)
+``Min``
+``RIG.Alarms.RULE.Raised``           Boolean; ``.Level`` (``warning``, ``alarm``) and
+                                     ``.State`` (the rule's last event: ``alarm``,
+                                     ``escalated``, ``acknowledged``, ``clear``)
+``RIG.SensorFault``                  Boolean: a sensor fault is raised
+===================================  =========================================================
+
+Measured values carry their frame's capture time as source timestamp and are written at most
+``update_hz`` a second per rig (the last frame of a session always). Every event of a rig is
+also an OPC UA event (BaseEventType) emitted by the rig's object: its ``SourceName`` is the
+rule, its ``Message`` the event's line, its ``Severity`` 800 for an alarm, 500 for a warning,
+300 for an acknowledgement, 100 for a clear.
+
+Access: anonymous only when ``anonymous: true``; users and passwords from ``users_file`` (a
+YAML mapping); security policies ``none`` and ``basic256sha256`` (sign and encrypt, with the
+server's own certificate, made on first start in ``certificate_dir``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import logging
+import math
+import socket
+import threading
+import time
+from collections.abc import Coroutine
+from datetime import timezone
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..errors import InputError
+from ..pipeline import FusedFrame
+from ..schema import read_mapping
+from .config import OpcUaConfig
+from .homeassistant import RigEntities
+
+if TYPE_CHECKING:
+    from asyncua import Node, Server
+
+INSTALL = "the monitor's OPC UA server needs the opcua extra: pip install 'thermodepth[opcua]'"
+SEVERITY = {"alarm": 800, "escalated": 800, "acknowledged": 300, "clear": 100}
+STATS = ("Max", "Mean", "Min")
+
+
+def read_users(path: Path) -> dict[str, str]:
+    """The users and their passwords (a YAML mapping of names to passwords); InputError when
+    it is not one."""
+    users = read_mapping(path)
+    bad = [k for k, v in users.items() if not isinstance(v, str) or not v]
+    if bad:
+        raise InputError(f"{path}: {', '.join(map(repr, bad))}: give each user a password")
+    return {str(k): str(v) for k, v in users.items()}
+
+
+class OpcUaServer:
+    """The server of a monitor's rigs (module docstring); ``start`` binds its endpoint (one
+    InputError line when it cannot), ``stop`` ends it; the rest may come from any thread and
+    never waits for the server."""
+
+    def __init__(
+        self, config: OpcUaConfig, rigs: list[RigEntities], storage: Path, log: Any
+    ) -> None:
+        try:
+            import asyncua  # noqa: F401
+        except ImportError:
+            raise InputError(INSTALL) from None
+        self.config, self.rigs, self.log = config, rigs, log
+        self.certificates = config.certificate_dir or storage / "opcua"
+        self.users = read_users(config.users_file) if config.users_file else {}
+        self.nodes: dict[str, Node] = {}
+        self.emitters: dict[str, Any] = {}
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.server: Server | None = None
+        self.namespace = 0
+        self._last: dict[str, float] = {}
+        self._pending: dict[str, FusedFrame] = {}  # a rig's newest frame not yet written
+        self._lock = threading.Lock()
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._stopped: asyncio.Event | None = None
+        self._thread = threading.Thread(target=self._main, name="opcua", daemon=True)
+
+    # -- the server's own thread ---------------------------------------------------------------
+
+    def start(self, timeout_s: float = 30.0) -> None:
+        host, port = self.config.address()
+        try:
+            with socket.socket() as s:  # a port that is taken is one line, not a traceback
+                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                s.bind((host, port))
+        except OSError as exc:
+            raise InputError(
+                f"opcua.endpoint: {self.config.endpoint}: cannot listen ({exc.strerror or exc})"
+            ) from None
+        self._thread.start()
+        if not self._ready.wait(timeout_s) or self._error is not None:
+            raise InputError(f"opcua: the server did not start ({self._error or 'no answer'})")
+
+    def _main(self) -> None:
+        try:
+            asyncio.run(self._serve())
+        except BaseException as exc:  # told by start(), or logged once running
+            self._error = exc
+            self._ready.set()
+            self.log(f"opcua: the server stopped: {exc}")
+
+    async def _serve(self) -> None:
+        from asyncua import Server, ua
+        from asyncua.crypto.permission_rules import SimpleRoleRuleset
+        from asyncua.server.user_managers import User, UserManager, UserRole
+
+        logging.getLogger("asyncua").setLevel(logging.ERROR)
+        users, anonymous = self.users, self.config.anonymous
+        # asyncua opens an unsecured channel whatever the endpoints offer: without policy
+        # "none", a session is refused unless its channel carries the client's certificate
+        secure_only = "none" not in self.config.security
+
+        class Users(UserManager):
+            def get_user(
+                self,
+                iserver: Any,
+                username: str | None = None,
+                password: str | None = None,
+                certificate: Any = None,
+            ) -> User | None:
+                if secure_only and certificate is None:
+                    return None
+                if username is None:
+                    return User(role=UserRole.User, name="anonymous") if anonymous else None
+                known = users.get(username)
+                ok = known is not None and hmac.compare_digest(known, password or "")
+                return User(role=UserRole.User, name=username) if ok else None
+
+        server = Server(user_manager=Users())
+        await server.init()
+        server.set_endpoint(self.config.endpoint)
+        server.set_server_name("thermodepth monitor")
+        tokens: list[type] = [ua.UserNameIdentityToken]
+        if anonymous:
+            tokens.append(ua.AnonymousIdentityToken)
+        server.set_identity_tokens(tokens)
+        policies = []
+        if "none" in self.config.security:
+            policies.append(ua.SecurityPolicyType.NoSecurity)
+        if "basic256sha256" in self.config.security:
+            policies.append(ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt)
+            await self._certificate(server)
+        server.set_security_policy(policies, permission_ruleset=SimpleRoleRuleset())
+        self.namespace = await server.register_namespace(self.config.namespace)
+        await self._address_space(server)
+        self.loop, self.server, self._stopped = asyncio.get_running_loop(), server, asyncio.Event()
+        async with server:
+            self._ready.set()
+            await self._stopped.wait()
+
+    async def _certificate(self, server: Server) -> None:
+        """The server's key and self-signed certificate, made on first start."""
+        from asyncua.crypto.cert_gen import setup_self_signed_certificate
+        from cryptography.x509.oid import ExtendedKeyUsageOID
+
+        self.certificates.mkdir(parents=True, exist_ok=True)
+        key, cert = self.certificates / "server-key.pem", self.certificates / "server-cert.der"
+        host = socket.gethostname()
+        await setup_self_signed_certificate(
+            key,
+            cert,
+            server.get_application_uri(),
+            host,
+            [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
+            {"commonName": f"thermodepth monitor on {host}", "organizationName": "thermodepth"},
+        )
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
+
+    def _id(self, path: str) -> Any:
+        """The node id of a path in our namespace (a string id)."""
+        from asyncua import ua
+
+        return ua.NodeId(ua.String(path), ua.Int16(self.namespace))
+
+    async def _address_space(self, server: Server) -> None:
+        from asyncua import ua
+
+        root = await server.nodes.objects.add_object(self._id("Thermodepth"), "Thermodepth")
+
+        async def variable(parent: Node, path: str, name: str, value: Any, kind: Any) -> None:
+            node = await parent.add_variable(self._id(path), name, ua.Variant(value, kind))
+            self.nodes[path] = node
+
+        d, s, b = ua.VariantType.Double, ua.VariantType.String, ua.VariantType.Boolean
+        for rig in self.rigs:
+            obj = await root.add_object(self._id(rig.name), rig.name)
+            if rig.location:
+                await obj.write_attribute(
+                    ua.AttributeIds.Description,
+                    ua.DataValue(ua.Variant(ua.LocalizedText(rig.location))),
+                )
+            self.emitters[rig.name] = await server.get_event_generator(emitting_node=obj.nodeid)
+            await variable(obj, f"{rig.name}.Health", "Health", "stale", s)
+            await variable(obj, f"{rig.name}.Up", "Up", False, b)
+            await variable(obj, f"{rig.name}.FramesPerSecond", "FramesPerSecond", 0.0, d)
+            await variable(obj, f"{rig.name}.VoxTemperature", "VoxTemperature", math.nan, d)
+            await variable(obj, f"{rig.name}.Hottest", "Hottest", math.nan, d)
+            await variable(obj, f"{rig.name}.SensorFault", "SensorFault", False, b)
+            rois = await obj.add_object(self._id(f"{rig.name}.Rois"), "Rois")
+            for roi in rig.rois:
+                folder = await rois.add_object(self._id(f"{rig.name}.Rois.{roi}"), roi)
+                for stat in STATS:
+                    await variable(folder, f"{rig.name}.Rois.{roi}.{stat}", stat, math.nan, d)
+            alarms = await obj.add_object(self._id(f"{rig.name}.Alarms"), "Alarms")
+            for rule in rig.rules:
+                node = await alarms.add_object(self._id(f"{rig.name}.Alarms.{rule}"), rule)
+                await variable(node, f"{rig.name}.Alarms.{rule}.Raised", "Raised", False, b)
+                await variable(node, f"{rig.name}.Alarms.{rule}.Level", "Level", "", s)
+                await variable(node, f"{rig.name}.Alarms.{rule}.State", "State", "", s)
+
+    # -- what the monitor tells it (any thread) ------------------------------------------------
+
+    def _submit(self, work: Coroutine[Any, Any, None]) -> None:
+        if self.loop is None or self.loop.is_closed():
+            work.close()
+            return
+        asyncio.run_coroutine_threadsafe(work, self.loop)
+
+    async def _write(self, values: dict[str, Any], time_s: float | None) -> None:
+        from asyncua import ua
+
+        stamp = None if time_s is None else ua.DateTime.fromtimestamp(time_s, timezone.utc)
+        for path, value in values.items():
+            node = self.nodes.get(path)
+            if node is None:
+                continue
+            kind = (
+                ua.VariantType.Boolean
+                if isinstance(value, bool)
+                else ua.VariantType.String
+                if isinstance(value, str)
+                else ua.VariantType.Double
+            )
+            await node.write_value(ua.DataValue(ua.Variant(value, kind), SourceTimestamp=stamp))
+
+    def measured(self, rig: str, fused: FusedFrame) -> None:
+        """A rig's fused frame: its readings, at most ``update_hz`` a second; a frame held
+        back is written by :meth:`flush` once its time comes, unless a newer one was."""
+        with self._lock:
+            self._pending[rig] = fused
+        self.flush(rig)
+
+    def flush(self, only: str | None = None) -> None:
+        """Write the frames held back whose time has come (the monitor's clock calls it, so
+        that a rig's last frame is always written)."""
+        now = time.monotonic()
+        with self._lock:
+            due = [
+                (rig, fused)
+                for rig, fused in self._pending.items()
+                if (only is None or rig == only)
+                and now - self._last.get(rig, -math.inf) >= 1.0 / self.config.update_hz
+            ]
+            for rig, _ in due:
+                self._last[rig] = now
+                del self._pending[rig]
+        for rig, fused in due:
+            self._write_frame(rig, fused)
+
+    def _write_frame(self, rig: str, fused: FusedFrame) -> None:
+        hot = fused.hotspots[0].max_c if fused.hotspots else math.nan
+        values: dict[str, Any] = {
+            f"{rig}.Hottest": float(hot),
+            f"{rig}.VoxTemperature": float(fused.vox_temp_c),
+        }
+        for roi in fused.rois:
+            for stat in STATS:
+                value = getattr(roi, f"{stat.lower()}_c") if roi.n else math.nan
+                values[f"{rig}.Rois.{roi.name}.{stat}"] = float(value)
+        self._submit(self._write(values, fused.thermal_time_s))
+
+    def status(self, rig: dict[str, Any]) -> None:
+        """A rig's figures (``Monitor.status``'s entry)."""
+        values = {
+            f"{rig['name']}.Health": rig["health"],
+            f"{rig['name']}.Up": bool(rig["up"]),
+            f"{rig['name']}.FramesPerSecond": float(rig["fps"]),
+            f"{rig['name']}.SensorFault": any(
+                a["rule"] == "sensor_fault" for a in rig["active_alarms"]
+            ),
+        }
+        self._submit(self._write(values, None))
+
+    def event(self, event: dict[str, Any], raised: bool | None) -> None:
+        """An event of a rig: its rule's state (``raised``: whether it is raised now; None
+        for a sensor fault), and an OPC UA event."""
+        rig, rule = event["rig"], event["rule"]
+        values: dict[str, Any] = {}
+        if raised is not None:
+            values = {
+                f"{rig}.Alarms.{rule}.Raised": raised,
+                f"{rig}.Alarms.{rule}.Level": event.get("level", ""),
+                f"{rig}.Alarms.{rule}.State": event["event"],
+            }
+        self._submit(self._emit(event, values))
+
+    async def _emit(self, event: dict[str, Any], values: dict[str, Any]) -> None:
+        from asyncua import ua
+
+        from ..alarms import event_line
+
+        await self._write(values, event.get("time_s"))
+        emitter = self.emitters.get(event["rig"])
+        if emitter is None:
+            return
+        emitter.event.SourceName = event["rule"]
+        emitter.event.Severity = SEVERITY.get(event["event"], 500) - (
+            300 if event.get("level") == "warning" and event["event"] != "clear" else 0
+        )
+        emitter.event.Message = ua.LocalizedText(event_line(event))
+        await emitter.trigger()
+
+    def stop(self) -> None:
+        if self.loop is not None and self._stopped is not None and not self.loop.is_closed():
+            self.loop.call_soon_threadsafe(self._stopped.set)
+        self._thread.join(10.0)
