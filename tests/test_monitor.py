@@ -85,15 +85,25 @@ def seen(tmp_path_factory: pytest.TempPathFactory) -> Seen:
             lambda: (r := client.get("/healthz")).status_code == 503 and r.json(), 5
         )
         wait_for(lambda: "latched" in str(client.get("/api/status").json()), 5)
+        csrf = {"X-CSRF-Token": client.get("/api/session").json()["csrf"]}
+        out.http["ack_forged"] = client.post(
+            "/api/ack", json={"rig": "b", "rule": "latched", "by": "mallory"}
+        )
+        out.http["ack_form"] = client.post(
+            "/api/ack", content='{"rig": "b", "rule": "latched", "by": "mallory"}',
+            headers={**csrf, "Content-Type": "text/plain"},
+        )  # fmt: skip
         out.http["ack_unknown_rig"] = client.post(
-            "/api/ack", json={"rig": "z", "rule": "latched", "by": "jane"}
+            "/api/ack", json={"rig": "z", "rule": "latched", "by": "jane"}, headers=csrf
         )
         out.http["ack_unknown_rule"] = client.post(
-            "/api/ack", json={"rig": "b", "rule": "melt", "by": "jane"}
+            "/api/ack", json={"rig": "b", "rule": "melt", "by": "jane"}, headers=csrf
         )
-        out.http["ack_bad"] = client.post("/api/ack", json={"rig": "b", "rule": "latched"})
+        out.http["ack_bad"] = client.post(
+            "/api/ack", json={"rig": "b", "rule": "latched"}, headers=csrf
+        )
         out.http["ack"] = client.post(
-            "/api/ack", json={"rig": "b", "rule": "latched", "by": "operator jane"}
+            "/api/ack", json={"rig": "b", "rule": "latched", "by": "operator jane"}, headers=csrf
         )
         time.sleep(max(0.0, RUN_S - (time.monotonic() - t0)))
         out.http["status"] = client.get("/api/status").json()
@@ -214,6 +224,10 @@ def test_healthz_says_which_rig_is_stale(seen: Seen) -> None:
 
 
 def test_acknowledge_over_http(seen: Seen) -> None:
+    # without the page's CSRF token, or as a form a foreign page could post: refused
+    assert seen.http["ack_forged"].status_code == 403
+    assert "X-CSRF-Token" in seen.http["ack_forged"].json()["error"]
+    assert seen.http["ack_form"].status_code == 403
     assert seen.http["ack_unknown_rig"].status_code == 404
     assert seen.http["ack_unknown_rule"].status_code == 404
     assert seen.http["ack_unknown_rule"].json() == {"error": "b: no alarm rule 'melt'"}
@@ -238,7 +252,7 @@ def test_status_and_events_over_http(seen: Seen) -> None:
     ids = [e["id"] for e in events]
     assert ids == sorted(ids, reverse=True)  # newest first
     assert {"rig", "rule", "level", "state", "time_s", "time_utc"} <= set(events[0])
-    assert {e["state"] for e in events} >= {"alarm", "clear", "acknowledged"}
+    assert {e["state"] for e in events} >= {"alarm", "clear", "acknowledged"}, events[:3]
     page = seen.http["page"]
     assert len(page) == 5 and {e["rig"] for e in page} == {"a"}
     assert seen.http["bad_limit"].status_code == 400

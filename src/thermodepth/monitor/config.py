@@ -8,6 +8,7 @@ relative to the file's folder.
 from __future__ import annotations
 
 import ipaddress
+import os
 import re
 from pathlib import Path
 from typing import Literal
@@ -19,6 +20,7 @@ from ..pipeline import MqttSettings, Settings
 from ..schema import StrictSchema, read_mapping, validation_lines
 from ..sinks.mqtt import MqttTarget, read_password
 from ..sources import check_spec
+from .auth import TOKEN_ENV
 
 RIG_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 MONITOR = "monitor"
@@ -75,12 +77,15 @@ class StorageConfig(StrictSchema):
 
 
 class HttpConfig(StrictSchema):
-    """The health and API server: ``listen`` (``HOST:PORT``, port 0: any free one; null:
-    none), ``token_file`` (its first line is the bearer token every request but
-    ``/healthz`` must carry; needed to listen beyond this machine)."""
+    """The dashboard, API and health server: ``listen`` (``HOST:PORT``, port 0: any free one;
+    null: none), ``token_file`` (its first line is the token every route but ``/healthz``
+    wants; else ``THERMODEPTH_HTTP_TOKEN``; needed to listen beyond this machine),
+    ``tls_cert`` and ``tls_key`` (PEM files: HTTPS)."""
 
     listen: str | None = DEFAULT_LISTEN
     token_file: Path | None = None
+    tls_cert: Path | None = None
+    tls_key: Path | None = None
 
     def address(self) -> tuple[str, int]:
         """(host, port) of ``listen``; ValueError if it is not ``HOST:PORT``."""
@@ -195,7 +200,10 @@ def _resolved(config: MonitorConfig, base: Path) -> MonitorConfig:
         "rigs": rigs,
         "storage": config.storage.model_copy(update={"path": base / config.storage.path}),
         "http": config.http.model_copy(
-            update={"token_file": _relative(base, config.http.token_file)}
+            update={
+                name: _relative(base, getattr(config.http, name))
+                for name in ("token_file", "tls_cert", "tls_key")
+            }
         ),
     }
     if config.opcua is not None:
@@ -250,13 +258,19 @@ def config_problems(config: MonitorConfig) -> list[str]:
     http = config.http
     if http.listen is not None:
         try:
-            if not http.loopback() and http.token_file is None:
+            if not http.loopback() and http.token_file is None and not os.environ.get(TOKEN_ENV):
                 problems.append(
                     f"http.listen: {http.listen} is reachable from other machines: give "
-                    "http.token_file (a bearer token), or listen on 127.0.0.1"
+                    f"http.token_file (or {TOKEN_ENV}), or listen on 127.0.0.1"
                 )
         except ValueError as exc:
             problems.append(f"http.{exc}")
+    if (http.tls_cert is None) != (http.tls_key is None):
+        problems.append("http: tls_cert and tls_key go together")
+    for name in ("tls_cert", "tls_key"):
+        path = getattr(http, name)
+        if path is not None and not path.is_file():
+            problems.append(f"http.{name}: {path}: no such file")
     if http.token_file is not None:
         try:
             read_token(http.token_file)

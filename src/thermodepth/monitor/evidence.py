@@ -14,6 +14,7 @@ through ``on_fault``.
 
 from __future__ import annotations
 
+import os
 import queue
 import threading
 import time
@@ -311,7 +312,11 @@ class Evidence:
             try:
                 folder.mkdir(parents=True, exist_ok=True)
                 scale = range_c or display_range_c(fused.temp_depth_c)
-                write_snapshot(fused, folder / "overlay.png", folder / "frame.ply", title, scale)
+                # written aside and renamed: a reader never gets half a file
+                png, ply = folder / ".overlay.png", folder / ".frame.ply"
+                write_snapshot(fused, png, ply, title, scale)
+                os.replace(ply, folder / "frame.ply")
+                os.replace(png, folder / "overlay.png")
             except Exception as exc:
                 self.on_fault(f"{folder.name}: overlay and point cloud not kept: {exc}")
 

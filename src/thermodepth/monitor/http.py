@@ -1,33 +1,54 @@
-"""The monitor's health and API over HTTP (Starlette on uvicorn, on a thread of its own).
+"""The monitor's web server (Starlette on uvicorn, on a thread of its own): the operator's
+dashboard, its JSON API (documented by an OpenAPI schema at ``/api/openapi.json``; the pages
+use nothing else), health and metrics. Who may use it: :mod:`.auth`.
 
-==================================  ============================================================
-route                               what
-==================================  ============================================================
-``GET /healthz``                    200 while every rig has fresh data, else 503 naming the
-                                    rigs that have none (no token needed: for probes)
-``GET /api/status``                 per rig: frames/s, age of the last frame, reconnects,
-                                    stalls, seconds without data, FFC, VOx, pipeline ms, active
-                                    alarms; the storage, the event store, the broker, latencies
-``GET /api/events``                 events, newest first (``limit`` <= 1000, ``rig``,
-                                    ``before`` an id, for the next page)
-``POST /api/ack``                   acknowledge ``{"rig", "rule", "by"}``: 200 with its
-                                    events, 404 no such rig or rule, 409 not raised
-``GET /metrics``                    the same figures in Prometheus' text format
-==================================  ============================================================
+=========================================  ==================================================
+route                                      what
+=========================================  ==================================================
+``GET /``, ``/rig/RIG``, ``/events``,      the dashboard's pages: every rig at a glance, a
+``/health``                                rig, the events, the monitor's health
+``GET /login``, ``POST /login``,           the login page (with a token), and leaving
+``POST /logout``
+``GET /healthz``                           200 while every rig has fresh data, else 503
+                                           naming the rigs that have none (no token: probes)
+``GET /api/status``                        per rig: state, health, frames/s, age of the last
+                                           frame, counters, FFC, VOx, hottest reading, ROIs,
+                                           active alarms, colour scale; storage, broker,
+                                           latencies
+``GET /api/session``                       who you are and the CSRF token your POSTs carry
+``GET /api/events``                        events, newest first: ``limit`` (<= 1000),
+                                           ``rig``, ``level``, ``state``, ``before`` (an id)
+``GET /api/events/ID``                     one event
+``GET /api/events/ID/snapshot.png``,       its overlay, point cloud, and clip (the recording
+``cloud.ply``, ``clip.zip``                as one zip); 404 when not kept
+``GET /api/rigs/RIG/overlay.jpg``,         the rig's latest overlay and thermal image
+``thermal.png``                            (``width``: scaled down)
+``GET /api/rigs/RIG/trend``                its readings over the last hour
+``POST /api/ack``                          acknowledge ``{"rig", "rule", "by"}``: 200 with
+                                           its events, 404 no such rig or rule, 409 not
+                                           raised, 403 a forged request
+``GET /metrics``                           Prometheus' text format (:mod:`.metrics`)
+=========================================  ==================================================
 
-With ``http.token_file`` every route but ``/healthz`` wants ``Authorization: Bearer TOKEN``
-(401 otherwise).
+Events and their evidence are addressed by id, never by a path.
 """
 
 from __future__ import annotations
 
-import hmac
+import json
+import os
 import socket
+import tempfile
 import threading
-from collections.abc import Iterator
+import zipfile
+from importlib.resources import files
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+from .. import __version__
 from ..errors import InputError
+from ..io.measurements import jsonable
+from .auth import COOKIE, SESSION_S, Auth, Identity
 from .config import HttpConfig, read_token
 from .supervisor import AckRefusedError
 
@@ -36,143 +57,167 @@ if TYPE_CHECKING:
     from starlette.requests import Request
     from starlette.responses import Response
 
+INSTALL = "the monitor's HTTP server needs the monitor extra: pip install 'thermodepth[monitor]'"
+WEB = files("thermodepth.monitor") / "web"
+PAGES = {"/": "index.html", "/events": "events.html", "/health": "health.html"}
+EVIDENCE = {"snapshot.png": "image/png", "cloud.ply": "application/octet-stream",
+            "clip.zip": "application/zip"}  # fmt: skip
+PICTURES = {"overlay.jpg": ("overlay", "image/jpeg"), "thermal.png": ("thermal", "image/png")}
+
 
 class Monitor(Protocol):
-    """What the routes ask of the monitor (:class:`~.service.Monitor` is one)."""
+    """What the web server asks of a monitor (:class:`~.service.Monitor` is one)."""
 
     def status(self) -> dict[str, Any]: ...
 
     def stale_rigs(self) -> list[str]: ...
 
     def events(
-        self, limit: int = 100, rig: str | None = None, before_id: int | None = None
+        self,
+        limit: int = 100,
+        rig: str | None = None,
+        before_id: int | None = None,
+        level: str | None = None,
+        state: str | None = None,
     ) -> list[dict[str, Any]]: ...
+
+    def event(self, event_id: int) -> dict[str, Any] | None: ...
+
+    def evidence_file(self, event_id: int, what: str) -> Path | None: ...
+
+    def picture(self, rig: str, what: str, width: int | None) -> bytes | None: ...
+
+    def trend(self, rig: str) -> list[dict[str, Any]] | None: ...
 
     def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]: ...
 
 
-INSTALL = "the monitor's HTTP server needs the monitor extra: pip install 'thermodepth[monitor]'"
+def _json(data: Any, status: int = 200) -> Response:
+    from starlette.responses import Response
+
+    body = json.dumps(jsonable(data), separators=(",", ":"))
+    return Response(body, status, media_type="application/json")
 
 
-def _collector(monitor: Monitor) -> Any:
-    """A prometheus_client collector of the monitor's figures, read when scraped."""
-    from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
-
-    class Collector:
-        def collect(self) -> Iterator[Any]:
-            status = monitor.status()
-            rigs = status["rigs"]
-
-            def per_rig(kind: type, name: str, doc: str, key: str) -> Any:
-                family = kind(name, doc, labels=["rig"])
-                for r in rigs:
-                    value = r[key]
-                    family.add_metric([r["name"]], float("nan") if value is None else value)
-                return family
-
-            yield per_rig(GaugeMetricFamily, "thermodepth_rig_up", "1 while fresh", "up")
-            yield per_rig(GaugeMetricFamily, "thermodepth_rig_fps", "frames/s, 5 s", "fps")
-            yield per_rig(
-                GaugeMetricFamily,
-                "thermodepth_rig_last_frame_age_seconds",
-                "seconds since the rig's last frame",
-                "last_frame_age_s",
-            )
-            yield per_rig(CounterMetricFamily, "thermodepth_rig_frames", "frames fused", "frames")
-            yield per_rig(
-                CounterMetricFamily, "thermodepth_rig_reconnects", "reopenings", "reconnects"
-            )
-            yield per_rig(CounterMetricFamily, "thermodepth_rig_stalls", "stalls", "stalls")
-            yield per_rig(
-                CounterMetricFamily,
-                "thermodepth_rig_seconds_without_data",
-                "seconds with no fresh data",
-                "seconds_without_data",
-            )
-            yield per_rig(
-                CounterMetricFamily, "thermodepth_rig_dropped", "paced pairs dropped", "dropped"
-            )
-            yield per_rig(GaugeMetricFamily, "thermodepth_rig_ffc", "shutter closing", "ffc")
-            yield per_rig(
-                GaugeMetricFamily, "thermodepth_rig_vox_celsius", "sensor temp", "vox_temp_c"
-            )
-            ms = GaugeMetricFamily(
-                "thermodepth_rig_pipeline_seconds",
-                "a pair's time through the pipeline, over the last 200",
-                labels=["rig", "quantile"],
-            )
-            alarms = GaugeMetricFamily(
-                "thermodepth_rig_alarms_active", "alarms raised now", labels=["rig", "level"]
-            )
-            for r in rigs:
-                for q, key in (("0.5", "median"), ("0.99", "p99")):
-                    value = r["pipeline_ms"][key]
-                    ms.add_metric([r["name"], q], float("nan") if value is None else value / 1e3)
-                for level in ("warning", "alarm"):
-                    n = sum(a["level"] == level for a in r["active_alarms"])
-                    alarms.add_metric([r["name"], level], n)
-            yield ms
-            yield alarms
-            events = CounterMetricFamily(
-                "thermodepth_events", "events since start", labels=["rig", "state"]
-            )
-            for rig, counts in status["event_counts"].items():
-                for state, n in sorted(counts.items()):
-                    events.add_metric([rig, state], n)
-            yield events
-            store = status["storage"]
-            yield GaugeMetricFamily(
-                "thermodepth_event_store_bytes",
-                "event store size",
-                value=store["event_store_bytes"],
-            )
-            yield GaugeMetricFamily(
-                "thermodepth_storage_free_bytes", "free disk", value=store["free_bytes"]
-            )
-            latency = GaugeMetricFamily(
-                "thermodepth_alarm_latency_seconds",
-                "from a frame's capture to its event's row, and to the broker's acknowledgement",
-                labels=["to", "quantile"],
-            )
-            for to, figures in status["latency_s"].items():
-                for q, key in (("0.5", "median"), ("0.99", "p99")):
-                    value = figures[key]
-                    latency.add_metric([to, q], float("nan") if value is None else value)
-            yield latency
-
-    return Collector()
+def _error(message: str, status: int) -> Response:
+    return _json({"error": message}, status)
 
 
-def build_app(monitor: Monitor, token: str | None) -> Starlette:
+def _zip_of(folder: Path) -> Path:
+    """A clip's recording as one zip (stored: its chunks are compressed already), in a
+    temporary file the response deletes once sent."""
+    fd, name = tempfile.mkstemp(suffix=".zip")
+    os.close(fd)
+    with zipfile.ZipFile(name, "w", zipfile.ZIP_STORED) as z:
+        for path in sorted(folder.rglob("*")):
+            if path.is_file():
+                z.write(path, Path(folder.name) / path.relative_to(folder))
+    return Path(name)
+
+
+def build_app(monitor: Monitor, auth: Auth) -> Starlette:
     """The Starlette application of the routes (module docstring)."""
     from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
     from starlette.applications import Starlette
-    from starlette.responses import JSONResponse, Response
-    from starlette.routing import Route
+    from starlette.background import BackgroundTask
+    from starlette.responses import FileResponse, HTMLResponse, RedirectResponse, Response
+    from starlette.routing import Mount, Route
+    from starlette.schemas import SchemaGenerator
+    from starlette.staticfiles import StaticFiles
+
+    from .metrics import collector
 
     registry = CollectorRegistry()
-    registry.register(_collector(monitor))
+    registry.register(collector(monitor.status))
+    schemas = SchemaGenerator(
+        {"openapi": "3.0.0", "info": {"title": "thermodepth monitor", "version": __version__}}
+    )
 
-    def refused(request: Request) -> Response | None:
-        if token is None:
-            return None
-        given = request.headers.get("authorization", "")
-        if hmac.compare_digest(given.encode(), f"Bearer {token}".encode()):
-            return None
-        return JSONResponse({"error": "a bearer token is needed"}, 401)
+    def who(request: Request) -> Identity | Response:
+        found = auth.identity(request.headers, request.cookies)
+        return found if found is not None else _error("a token is needed", 401)
+
+    def page(name: str) -> Any:
+        async def serve(request: Request) -> Response:
+            if auth.identity(request.headers, request.cookies) is None:
+                return RedirectResponse(f"/login?next={request.url.path}", 303)
+            return HTMLResponse((WEB / name).read_text(encoding="utf-8"))
+
+        return serve
+
+    async def login_page(request: Request) -> Response:
+        return HTMLResponse((WEB / "login.html").read_text(encoding="utf-8"))
+
+    async def login(request: Request) -> Response:
+        try:
+            body = await request.json()
+        except ValueError:
+            body = None
+        if not isinstance(body, dict) or not isinstance(body.get("token"), str):
+            return _error('expected {"token": ..., "name": ...}', 400)
+        name = str(body.get("name") or "").strip() or "operator"
+        session = auth.login(body["token"], name)
+        if session is None:
+            return _error("wrong token", 401)
+        response = _json({"name": name})
+        response.set_cookie(COOKIE, session, max_age=int(SESSION_S), httponly=True,
+                            samesite="strict", secure=auth.secure)  # fmt: skip
+        return response
+
+    async def logout(request: Request) -> Response:
+        auth.logout(request.cookies.get(COOKIE))
+        response = _json({"ok": True})
+        response.delete_cookie(COOKIE)
+        return response
 
     async def healthz(request: Request) -> Response:
+        """
+        responses:
+          200: {description: every rig has fresh data}
+          503: {description: the rigs without fresh data}
+        """
         stale = monitor.stale_rigs()
-        if stale:
-            return JSONResponse({"status": "stale", "rigs": stale}, 503)
-        return JSONResponse({"status": "ok"})
+        return _json({"status": "stale", "rigs": stale}, 503) if stale else _json({"status": "ok"})
 
     async def status(request: Request) -> Response:
-        return refused(request) or JSONResponse(monitor.status())
+        """
+        responses:
+          200: {description: "per rig: state, health, fps, last_frame_age_s, reconnects,
+            stalls, seconds_without_data, ffc, vox_temp_c, hottest, rois, active_alarms,
+            temp_range_c; storage, mqtt, event_counts, latency_s"}
+          401: {description: a token is needed}
+        """
+        you = who(request)
+        return you if not isinstance(you, Identity) else _json(monitor.status())
+
+    async def session(request: Request) -> Response:
+        """
+        responses:
+          200: {description: "who you are (auth: open, session or bearer; name) and the
+            CSRF token your POSTs carry as X-CSRF-Token"}
+        """
+        you = who(request)
+        if not isinstance(you, Identity):
+            return you
+        return _json({"auth": you.kind, "name": you.name, "csrf": you.csrf})
 
     async def events(request: Request) -> Response:
-        if (no := refused(request)) is not None:
-            return no
+        """
+        parameters:
+          - {name: limit, in: query, schema: {type: integer, default: 100, maximum: 1000}}
+          - {name: rig, in: query, schema: {type: string}}
+          - {name: level, in: query, schema: {type: string, enum: [warning, alarm]}}
+          - {name: state, in: query,
+             schema: {type: string, enum: [alarm, escalated, acknowledged, clear]}}
+          - {name: before, in: query, description: only older than this id,
+             schema: {type: integer}}
+        responses:
+          200: {description: events, newest first}
+          400: {description: a bad parameter}
+        """
+        you = who(request)
+        if not isinstance(you, Identity):
+            return you
         q = request.query_params
         try:
             limit = min(int(q.get("limit", "100")), 1000)
@@ -180,58 +225,176 @@ def build_app(monitor: Monitor, token: str | None) -> Starlette:
             if limit < 1:
                 raise ValueError
         except ValueError:
-            return JSONResponse({"error": "limit and before are whole numbers, limit >= 1"}, 400)
-        return JSONResponse(monitor.events(limit, q.get("rig"), before))
+            return _error("limit and before are whole numbers, limit >= 1", 400)
+        found = monitor.events(limit, q.get("rig"), before, q.get("level"), q.get("state"))
+        return _json(found)
+
+    async def event(request: Request) -> Response:
+        """
+        responses:
+          200: {description: the event}
+          404: {description: no such event}
+        """
+        you = who(request)
+        if not isinstance(you, Identity):
+            return you
+        found = monitor.event(request.path_params["id"])
+        return _json(found) if found is not None else _error("no such event", 404)
+
+    def evidence(request: Request) -> Response:
+        """
+        responses:
+          200: {description: "the event's overlay (snapshot.png), point cloud (cloud.ply)
+            or clip (clip.zip: the recording)"}
+          404: {description: no such event, or its evidence is not kept}
+        """
+        you = who(request)
+        if not isinstance(you, Identity):
+            return you
+        what = request.path_params["what"]
+        if what not in EVIDENCE:
+            return _error(f"expected one of {', '.join(EVIDENCE)}", 404)
+        path = monitor.evidence_file(request.path_params["id"], what)
+        if path is None:
+            return _error("not kept", 404)
+        name = f"event-{request.path_params['id']}-{what}"
+        if what == "clip.zip":
+            packed = _zip_of(path)
+            return FileResponse(packed, media_type=EVIDENCE[what], filename=name,
+                                background=BackgroundTask(packed.unlink))  # fmt: skip
+        return FileResponse(path, media_type=EVIDENCE[what], filename=name)
+
+    def picture(request: Request) -> Response:
+        """
+        parameters:
+          - {name: width, in: query, schema: {type: integer}}
+        responses:
+          200: {description: "the rig's latest overlay (overlay.jpg) or thermal image
+            (thermal.png)"}
+          404: {description: no such rig, or no frame yet}
+        """
+        you = who(request)
+        if not isinstance(you, Identity):
+            return you
+        what = request.path_params["what"]
+        if what not in PICTURES:
+            return _error(f"expected one of {', '.join(PICTURES)}", 404)
+        try:
+            width = int(request.query_params["width"]) if "width" in request.query_params else None
+        except ValueError:
+            return _error("width: a whole number of pixels", 400)
+        kind, media = PICTURES[what]
+        data = monitor.picture(request.path_params["rig"], kind, width)
+        if data is None:
+            return _error("no such rig, or no frame yet", 404)
+        return Response(data, media_type=media, headers={"Cache-Control": "no-store"})
+
+    async def trend(request: Request) -> Response:
+        """
+        responses:
+          200: {description: "the rig's readings every 10 s over the last hour: time_s,
+            hottest_c, rois (each ROI's max, C)"}
+          404: {description: no such rig}
+        """
+        you = who(request)
+        if not isinstance(you, Identity):
+            return you
+        found = monitor.trend(request.path_params["rig"])
+        return _json(found) if found is not None else _error("no such rig", 404)
 
     async def ack(request: Request) -> Response:
-        if (no := refused(request)) is not None:
-            return no
+        """
+        requestBody:
+          content:
+            application/json:
+              schema: {type: object, required: [rig, rule],
+                       properties: {rig: {type: string}, rule: {type: string},
+                                    by: {type: string}}}
+        responses:
+          200: {description: the acknowledgement's events}
+          400: {description: a malformed body}
+          403: {description: a forged request (no JSON, no CSRF token)}
+          404: {description: no such rig or rule}
+          409: {description: not raised}
+        """
+        you = who(request)
+        if not isinstance(you, Identity):
+            return you
+        forged = auth.forged(you, request.headers)
+        if forged is not None:
+            return _error(forged, 403)
         try:
             body = await request.json()
         except ValueError:
             body = None
-        fields = ("rig", "rule", "by")
-        if not isinstance(body, dict) or not all(isinstance(body.get(k), str) for k in fields):
-            return JSONResponse({"error": 'expected {"rig": ..., "rule": ..., "by": ...}'}, 400)
-        if not body["by"].strip():
-            return JSONResponse({"error": "by: say who acknowledges"}, 400)
+        if not isinstance(body, dict) or not all(
+            isinstance(body.get(k), str) for k in ("rig", "rule")
+        ):
+            return _error('expected {"rig": ..., "rule": ..., "by": ...}', 400)
+        by = str(body.get("by") or you.name or "").strip()
+        if not by:
+            return _error("by: say who acknowledges", 400)
         try:
-            return JSONResponse(monitor.acknowledge(body["rig"], body["rule"], body["by"]))
+            return _json(monitor.acknowledge(body["rig"], body["rule"], by))
         except AckRefusedError as exc:
-            return JSONResponse({"error": exc.message}, exc.status)
+            return _error(exc.message, exc.status)
 
     async def metrics(request: Request) -> Response:
-        return refused(request) or Response(
-            generate_latest(registry), media_type=CONTENT_TYPE_LATEST
-        )
+        you = who(request)
+        if not isinstance(you, Identity):
+            return you
+        return Response(generate_latest(registry), media_type=CONTENT_TYPE_LATEST)
 
-    return Starlette(
-        routes=[
-            Route("/healthz", healthz),
-            Route("/api/status", status),
-            Route("/api/events", events),
-            Route("/api/ack", ack, methods=["POST"]),
-            Route("/metrics", metrics),
-        ]
-    )
+    async def openapi(request: Request) -> Response:
+        return schemas.OpenAPIResponse(request=request)
+
+    routes = [
+        *(Route(path, page(name)) for path, name in PAGES.items()),
+        Route("/rig/{rig}", page("rig.html")),
+        Route("/login", login_page),
+        Route("/login", login, methods=["POST"]),
+        Route("/logout", logout, methods=["POST"]),
+        Route("/healthz", healthz),
+        Route("/api/status", status),
+        Route("/api/session", session),
+        Route("/api/events", events),
+        Route("/api/events/{id:int}", event),
+        Route("/api/events/{id:int}/{what}", evidence),
+        Route("/api/rigs/{rig}/trend", trend),
+        Route("/api/rigs/{rig}/{what}", picture),
+        Route("/api/ack", ack, methods=["POST"]),
+        Route("/api/openapi.json", openapi, include_in_schema=False),
+        Route("/metrics", metrics),
+        Mount("/static", StaticFiles(directory=str(WEB)), name="static"),
+    ]
+    return Starlette(routes=routes)
 
 
 class HttpServer:
-    """The application served by uvicorn on a thread of its own; ``start`` binds the address
-    first, so that one taken is one InputError line."""
+    """The application served by uvicorn on a thread of its own (over TLS when
+    ``http.tls_cert`` and ``tls_key`` are given); ``start`` binds the address first, so that
+    one taken is one InputError line."""
 
     def __init__(self, monitor: Monitor, config: HttpConfig) -> None:
         try:
             import uvicorn
 
-            app = build_app(
-                monitor, None if config.token_file is None else read_token(config.token_file)
-            )
+            token = None if config.token_file is None else read_token(config.token_file)
+            self.tls = config.tls_cert is not None
+            app = build_app(monitor, Auth.from_env(token, secure=self.tls))
         except ImportError:
             raise InputError(INSTALL) from None
         self.host, self.port = config.address()
+        cert, key = config.tls_cert, config.tls_key
         self.server = uvicorn.Server(
-            uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off")
+            uvicorn.Config(
+                app,
+                log_level="warning",
+                access_log=False,
+                lifespan="off",
+                ssl_certfile=None if cert is None else str(cert),
+                ssl_keyfile=None if key is None else str(key),
+            )
         )
         self._thread: threading.Thread | None = None
 
@@ -255,7 +418,7 @@ class HttpServer:
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}"
+        return f"{'https' if self.tls else 'http'}://{host}:{self.port}"
 
     def stop(self) -> None:
         self.server.should_exit = True

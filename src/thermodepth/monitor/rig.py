@@ -28,6 +28,7 @@ from ..sinks.base import BaseSink, RunContext, SessionResult
 from ..sources.base import Source
 from .evidence import Evidence, PreTrigger
 from .failsafe import SensorWatch
+from .live import LiveView
 from .storage import ContinuousRecorder
 
 LATE_S = 1.0
@@ -64,6 +65,8 @@ class RigStatus:
     pipeline_s: deque[float] = field(default_factory=lambda: deque(maxlen=200))
     lag_s: deque[float] = field(default_factory=lambda: deque(maxlen=200))
     arrivals: deque[float] = field(default_factory=lambda: deque(maxlen=600))
+    hottest: dict[str, Any] | None = None
+    rois: dict[str, dict[str, Any]] = field(default_factory=dict)
     last_error: str | None = None
     last_recovery: str | None = None
     counters: dict[str, int] = field(default_factory=dict)
@@ -102,6 +105,8 @@ class RigStatus:
             "dropped": self.dropped,
             "ffc": self.in_ffc,
             "vox_temp_c": None if np.isnan(self.vox_temp_c) else round(self.vox_temp_c, 3),
+            "hottest": self.hottest,
+            "rois": self.rois,
             "pipeline_ms": quantiles(self.pipeline_s, 1e3),
             "pace_lag_ms": quantiles(self.lag_s, 1e3),
             "last_error": self.last_error,
@@ -234,9 +239,9 @@ def _time_of(event: StreamEvent) -> float:
 class RigSink(BaseSink):
     """The monitor's sink of one rig's sessions (every reopening a session of its own):
     every event to the pre-trigger buffer (``pre``), the open clip (``evidence``) and the
-    continuous recording; every fused frame's figures to ``status`` and the frame to
-    ``measured(sink, fused)``, its alarm events and sensor faults (``watch``) to
-    ``emit(sink, events, fused)``."""
+    continuous recording; every fused frame's figures to ``status``, the frame to
+    ``measured(sink, fused)`` and to the screens (``live``), its alarm events and sensor
+    faults (``watch``) to ``emit(sink, events, fused)``."""
 
     def __init__(
         self,
@@ -248,9 +253,11 @@ class RigSink(BaseSink):
         watch: SensorWatch,
         emit: Callable[[RigSink, list[dict[str, Any]], FusedFrame | None], None],
         measured: Callable[[RigSink, FusedFrame], None],
+        live: LiveView,
     ) -> None:
         self.name, self.status, self.pre, self.evidence = name, status, pre, evidence
         self.continuous, self.watch, self.emit, self.measured = continuous, watch, emit, measured
+        self.live = live
         self.context: RunContext | None = None
         self._match_at: float | None = None
         self._previous: np.ndarray | None = None
@@ -290,6 +297,21 @@ class RigSink(BaseSink):
             s.pipeline_s.append(time.perf_counter() - self._match_at)
         s.frames += 1
         s.in_ffc, s.vox_temp_c = fused.in_ffc, fused.vox_temp_c
+        if not fused.in_ffc:
+            hot = fused.hotspots[0] if fused.hotspots else None
+            s.hottest = (
+                None
+                if hot is None
+                else {
+                    "max_c": hot.max_c,
+                    "position_m": list(hot.centroid_m),
+                    "distance_m": hot.distance_m,
+                    "resolvable": hot.resolvable,
+                }
+            )
+            s.rois = {r.name: {"max_c": r.max_c, "mean_c": r.mean_c, "min_c": r.min_c, "n": r.n}
+                      for r in fused.rois}  # fmt: skip
+        self.live.fused(fused)
         events = fused.events + self.watch.frame(fused, fused.thermal_time_s)
         if events:
             self.emit(self, events, fused)

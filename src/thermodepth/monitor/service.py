@@ -22,6 +22,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from datetime import datetime, timezone
+from pathlib import Path
 from typing import Any
 
 from .. import __version__
@@ -492,6 +493,7 @@ class Monitor:
             d["up"] = int(r.name not in stale)
             d["active_alarms"] = r.raised()
             d["health"] = "stale" if r.name in stale else "fault" if r.watch.raised else "ok"
+            d["temp_range_c"] = r.live.range_c
             rigs.append(d)
         path = self.config.storage.path
         try:
@@ -530,10 +532,53 @@ class Monitor:
         }
 
     def events(
-        self, limit: int = 100, rig: str | None = None, before_id: int | None = None
+        self,
+        limit: int = 100,
+        rig: str | None = None,
+        before_id: int | None = None,
+        level: str | None = None,
+        state: str | None = None,
     ) -> list[dict[str, Any]]:
         """The newest events (``/api/events``): those not yet in the store first."""
+        wanted = {"rig": rig, "level": level, "state": state}
         with self._lock:
-            waiting = [e for e in reversed(self.backlog) if rig is None or e["rig"] == rig]
-        stored = self.store.events(limit, rig, before_id)
+            waiting = [
+                e
+                for e in reversed(self.backlog)
+                if all(v is None or e.get(k) == v for k, v in wanted.items())
+            ]
+        stored = self.store.events(limit, rig, before_id, level, state)
         return (waiting if before_id is None else []) + stored[: max(0, limit - len(waiting))]
+
+    def event(self, event_id: int) -> dict[str, Any] | None:
+        """One stored event by its id."""
+        return self.store.event(event_id)
+
+    def evidence_file(self, event_id: int, what: str) -> Path | None:
+        """An event's kept evidence: ``snapshot.png`` (its clip's overlay), ``cloud.ply``
+        (its point cloud), ``clip.zip`` (the folder of its recording, zipped by the
+        caller); None when it has none or it is not kept. Found by the event's id, never a
+        path from outside: a clip id that leads out of the clips' folder is none."""
+        event = self.store.event(event_id)
+        if event is None or not event.get("clip") or not event.get("clip_kept", True):
+            return None
+        root = (self.config.storage.path / CLIPS).resolve()
+        folder = (root / str(event["clip"])).resolve()
+        if not folder.is_relative_to(root) or folder == root:
+            return None
+        path = {
+            "snapshot.png": folder / "overlay.png",
+            "cloud.ply": folder / "frame.ply",
+            "clip.zip": folder / "clip.zarr",
+        }.get(what)
+        return path if path is not None and path.exists() else None
+
+    def picture(self, rig: str, what: str, width: int | None = None) -> bytes | None:
+        """A rig's latest ``overlay`` (JPEG) or ``thermal`` (PNG) picture (:mod:`.live`)."""
+        runner = self.runners.get(rig)
+        return None if runner is None else runner.live.picture(what, width)
+
+    def trend(self, rig: str) -> list[dict[str, Any]] | None:
+        """A rig's readings over the last hour (:mod:`.live`)."""
+        runner = self.runners.get(rig)
+        return None if runner is None else list(runner.live.trend)

@@ -135,15 +135,21 @@ class EventStore:
         return out
 
     def events(
-        self, limit: int = 100, rig: str | None = None, before_id: int | None = None
+        self,
+        limit: int = 100,
+        rig: str | None = None,
+        before_id: int | None = None,
+        level: str | None = None,
+        state: str | None = None,
     ) -> list[dict[str, Any]]:
-        """The newest events (of one rig, older than an id), newest first, each with its
-        ``id`` and, where it has a clip, whether the clip is still kept."""
+        """The newest events (of one rig, level, state, older than an id), newest first,
+        each with its ``id`` and, where it has a clip, whether the clip is still kept."""
         where: list[str] = []
         args: list[Any] = []
-        if rig is not None:
-            where.append("rig = ?")
-            args.append(rig)
+        for column, value in (("rig", rig), ("level", level), ("state", state)):
+            if value is not None:
+                where.append(f"{column} = ?")
+                args.append(value)
         if before_id is not None:
             where.append("id < ?")
             args.append(before_id)
@@ -151,6 +157,11 @@ class EventStore:
         if where:
             sql += " WHERE " + " AND ".join(where)
         return self._rows(sql + " ORDER BY id DESC LIMIT ?", [*args, limit])
+
+    def event(self, event_id: int) -> dict[str, Any] | None:
+        """One event by its id (None: no such event)."""
+        found = self._rows("SELECT id, body, clip_kept FROM events WHERE id = ?", [event_id])
+        return found[0] if found else None
 
     def outbox(self, limit: int = 1000, after_id: int = 0) -> list[dict[str, Any]]:
         """Events waiting for the broker, oldest first."""

@@ -22,6 +22,7 @@ from ..sources import open_source, split_spec
 from .config import FailsafeConfig, RigConfig, StorageConfig
 from .evidence import Evidence, PreTrigger
 from .failsafe import SENSOR_FAULT, SensorWatch
+from .live import LiveView
 from .rig import PacedSource, RigSink, RigStatus
 from .storage import CONTINUOUS, ContinuousRecorder
 
@@ -85,9 +86,11 @@ class RigRunner:
             else None
         )
         pre = PreTrigger(storage.pre_s, int(storage.pre_max_mb * MB))
+        self.live = LiveView([r.roi() for r in s.rois], s.viewer.fixed_range_c)
         self.sink = RigSink(
-            config.name, self.status, pre, evidence, continuous, self.watch, emit, measured
-        )
+            config.name, self.status, pre, evidence, continuous, self.watch, emit, measured,
+            self.live,
+        )  # fmt: skip
         self.pipeline: Pipeline | None = None
         self.source: PacedSource | None = None
         self._stop = threading.Event()

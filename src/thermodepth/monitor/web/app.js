@@ -1,0 +1,238 @@
+// thermodepth dashboard: every page from the JSON API under /api, nothing else.
+const main = document.getElementById("main");
+const page = document.body.dataset.page;
+let session = { auth: "open", name: null, csrf: null };
+
+const esc = (s) => String(s ?? "").replace(/[&<>"']/g, (c) =>
+  ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]);
+const num = (v, d = 1) => (v === null || v === undefined || Number.isNaN(v) ? "–" : Number(v).toFixed(d));
+const when = (e) => new Date(e.time_utc).toLocaleString();
+
+async function api(path, options = {}) {
+  const r = await fetch(path, { credentials: "same-origin", ...options });
+  if (r.status === 401) { location.href = `/login?next=${encodeURIComponent(location.pathname)}`; throw new Error("login"); }
+  return r;
+}
+const json = async (path) => (await api(path)).json();
+
+function badge(text, kind = text) { return `<span class="badge ${esc(kind)}">${esc(text)}</span>`; }
+
+function legend(range) {
+  if (!range) return "";
+  return `<div class="legend"><span>${num(range[0], 0)} °C</span><span class="bar"></span><span>${num(range[1], 0)} °C</span></div>
+    <div class="legend"><span><i class="swatch" style="background:#008c8c"></i>no depth</span>
+    <span><i class="swatch" style="background:#bfbfbf"></i>outside the thermal view</span>
+    <span><i class="swatch" style="background:repeating-linear-gradient(45deg,#1acc1a 0 3px,#777 3px 6px)"></i>hidden</span></div>`;
+}
+
+function hottest(rig) {
+  const h = rig.hottest;
+  if (!h) return `<div class="hottest">– <small>no hotspot</small></div>`;
+  const where = h.position_m.map((x) => num(x, 2)).join(", ");
+  return `<div class="hottest" data-hottest="${h.max_c}">${num(h.max_c)} °C <small>at ${num(h.distance_m, 2)} m (${where} m)${h.resolvable ? "" : ", too small: reads low"}</small></div>`;
+}
+
+function alarmList(rig, withButtons) {
+  if (!rig.active_alarms.length) return `<p class="muted">No active alarm.</p>`;
+  return `<ul class="alarms">${rig.active_alarms.map((a) => `<li data-alarm="${esc(a.rule)}">${badge(a.level)}
+    <strong>${esc(a.rule)}</strong>${a.fault ? ` <span class="muted">${esc(a.fault)}</span>` : ""}
+    ${withButtons ? `<button data-ack="${esc(a.rule)}">Acknowledge</button>` : ""}</li>`).join("")}</ul>`;
+}
+
+// Live pictures: the next one asked for once the last has arrived, at 2 Hz at most.
+function keepLive(img, url) {
+  let alive = true;
+  const next = () => {
+    if (!alive || !document.body.contains(img)) return;
+    const started = Date.now();
+    img.onload = img.onerror = () => setTimeout(next, Math.max(0, 500 - (Date.now() - started)));
+    img.src = `${url}${url.includes("?") ? "&" : "?"}t=${started}`;
+  };
+  next();
+  return () => { alive = false; };
+}
+
+async function whoAmI() {
+  session = await json("/api/session");
+  const who = document.getElementById("who");
+  for (const a of document.querySelectorAll("[data-nav]")) a.classList.toggle("here", a.dataset.nav === page);
+  if (session.auth === "session") {
+    who.innerHTML = `${esc(session.name)} <button class="quiet" id="logout">Log out</button>`;
+    document.getElementById("logout").onclick = async () => {
+      await fetch("/logout", { method: "POST" });
+      location.href = "/login";
+    };
+  }
+}
+
+async function acknowledge(rig, rule) {
+  let by = session.name;
+  if (!by) {
+    by = localStorage.getItem("thermodepth-name") || prompt("Your name, recorded with the acknowledgement:");
+    if (!by) return;
+    localStorage.setItem("thermodepth-name", by);
+  }
+  const r = await api("/api/ack", {
+    method: "POST",
+    headers: { "Content-Type": "application/json", "X-CSRF-Token": session.csrf || "" },
+    body: JSON.stringify({ rig, rule, by }),
+  });
+  if (!r.ok) alert((await r.json()).error);
+}
+
+// -- overview: every rig as a card ---------------------------------------------------------
+
+async function overview() {
+  const cards = new Map();
+  main.innerHTML = `<div class="grid" id="rigs"></div>`;
+  const grid = document.getElementById("rigs");
+  const draw = async () => {
+    const status = await json("/api/status");
+    for (const rig of status.rigs) {
+      let card = cards.get(rig.name);
+      if (!card) {
+        card = document.createElement("section");
+        card.className = "card";
+        card.dataset.rig = rig.name;
+        card.innerHTML = `<div class="head"><h2><a href="/rig/${encodeURIComponent(rig.name)}">${esc(rig.name)}</a></h2>
+          <span class="where">${esc(rig.location || "")}</span><span class="state"></span></div>
+          <img class="live" alt="live overlay of ${esc(rig.name)}">
+          <div class="body"><div class="reading"></div><div class="scale"></div><div class="alarms-here"></div></div>`;
+        grid.append(card);
+        cards.set(rig.name, card);
+        keepLive(card.querySelector("img"), `/api/rigs/${encodeURIComponent(rig.name)}/overlay.jpg?width=640`);
+      }
+      card.querySelector(".state").innerHTML = badge(rig.health);
+      card.querySelector(".reading").innerHTML = hottest(rig);
+      card.querySelector(".scale").innerHTML = legend(rig.temp_range_c);
+      card.querySelector(".alarms-here").innerHTML = alarmList(rig, false);
+    }
+  };
+  await draw();
+  setInterval(draw, 1000);
+}
+
+// -- a rig ---------------------------------------------------------------------------------
+
+function spark(values) {
+  const v = values.filter((x) => x !== null && x !== undefined);
+  if (v.length < 2) return `<span class="muted">–</span>`;
+  const lo = Math.min(...v), hi = Math.max(...v), span = hi - lo || 1;
+  const pts = values.map((x, i) => (x === null ? null : `${(i / (values.length - 1)) * 160},${30 - ((x - lo) / span) * 28}`))
+    .filter(Boolean).join(" ");
+  return `<svg class="spark" viewBox="0 0 160 32"><polyline points="${pts}"/></svg>`;
+}
+
+async function rigPage() {
+  const name = decodeURIComponent(location.pathname.split("/").pop());
+  document.title = `thermodepth · ${name}`;
+  main.innerHTML = `<h2>${esc(name)} <span id="state"></span> <span class="muted" id="where"></span></h2>
+    <div class="two"><div><img class="live" id="overlay" alt="live overlay"><div id="scale"></div></div>
+    <div><img class="live" id="thermal" alt="thermal image" style="aspect-ratio:4/3"><div id="reading"></div>
+    <h3>Alarms</h3><div id="alarms"></div></div></div>
+    <h3>Regions of interest</h3><div class="scroll"><table id="rois"></table></div>
+    <h3>Recent events</h3><div class="scroll"><table id="events"></table></div>`;
+  const q = encodeURIComponent(name);
+  keepLive(document.getElementById("overlay"), `/api/rigs/${q}/overlay.jpg`);
+  keepLive(document.getElementById("thermal"), `/api/rigs/${q}/thermal.png`);
+  main.addEventListener("click", (e) => {
+    const rule = e.target.dataset?.ack;
+    if (rule) acknowledge(name, rule);
+  });
+  const draw = async () => {
+    const status = await json("/api/status");
+    const rig = status.rigs.find((r) => r.name === name);
+    if (!rig) { main.innerHTML = `<p class="error">No rig ${esc(name)}.</p>`; return; }
+    document.getElementById("state").innerHTML = badge(rig.health);
+    document.getElementById("where").textContent = rig.location || "";
+    document.getElementById("reading").innerHTML = hottest(rig);
+    document.getElementById("scale").innerHTML = legend(rig.temp_range_c);
+    document.getElementById("alarms").innerHTML = alarmList(rig, true);
+    const trend = await json(`/api/rigs/${q}/trend`);
+    const rows = Object.entries(rig.rois).map(([roi, s]) => `<tr data-roi="${esc(roi)}"><td>${esc(roi)}</td>
+      <td>${num(s.max_c)}</td><td>${num(s.mean_c)}</td><td>${num(s.min_c)}</td>
+      <td>${spark(trend.map((t) => t.rois[roi] ?? null))}</td></tr>`).join("");
+    document.getElementById("rois").innerHTML = `<tr><th>ROI</th><th>max °C</th><th>mean °C</th><th>min °C</th><th>max, last hour</th></tr>${rows}`;
+    const events = await json(`/api/events?rig=${q}&limit=20`);
+    document.getElementById("events").innerHTML = eventRows(events);
+  };
+  await draw();
+  setInterval(draw, 2000);
+}
+
+// -- events ----------------------------------------------------------------------------------
+
+function eventRows(events) {
+  const head = `<tr><th>when</th><th>rig</th><th>rule</th><th>level</th><th>state</th><th>value</th><th>what</th><th>evidence</th></tr>`;
+  return head + events.map((e) => {
+    const id = e.id;
+    const evidence = e.clip && e.clip_kept !== false && id !== undefined
+      ? `<a href="/api/events/${id}/snapshot.png"><img class="thumb" loading="lazy" src="/api/events/${id}/snapshot.png" alt="snapshot" onerror="this.replaceWith('overlay')"></a>
+         <a href="/api/events/${id}/clip.zip">clip</a> · <a href="/api/events/${id}/cloud.ply">PLY</a>`
+      : `<span class="muted">${e.clip ? "deleted" : "–"}</span>`;
+    return `<tr data-event="${id ?? ""}"><td>${esc(when(e))}</td><td>${esc(e.rig)}</td><td>${esc(e.rule)}${e.fault ? ` <span class="muted">${esc(e.fault)}</span>` : ""}</td>
+      <td>${badge(e.level)}</td><td>${badge(e.state, e.state === "alarm" || e.state === "escalated" ? e.level : e.state)}</td>
+      <td>${e.value_c === null || e.value_c === undefined ? "" : `${num(e.value_c)} °C`}</td>
+      <td>${esc(e.condition || "")}${e.by ? ` <span class="muted">by ${esc(e.by)}</span>` : ""}</td><td>${evidence}</td></tr>`;
+  }).join("");
+}
+
+async function eventsPage() {
+  const status = await json("/api/status");
+  const options = (values) => `<option value="">all</option>${values.map((v) => `<option>${esc(v)}</option>`).join("")}`;
+  main.innerHTML = `<div class="filters">
+    <label>rig <select id="rig">${options(status.rigs.map((r) => r.name).concat(["monitor"]))}</select></label>
+    <label>level <select id="level">${options(["warning", "alarm"])}</select></label>
+    <label>state <select id="state">${options(["alarm", "escalated", "acknowledged", "clear"])}</select></label>
+    </div><div class="scroll"><table id="events"></table></div><p><button class="quiet" id="older">Older</button></p>`;
+  const table = document.getElementById("events");
+  let shown = [];
+  const query = (before) => {
+    const p = new URLSearchParams({ limit: "50" });
+    for (const f of ["rig", "level", "state"]) { const v = document.getElementById(f).value; if (v) p.set(f, v); }
+    if (before) p.set("before", before);
+    return `/api/events?${p}`;
+  };
+  const first = async () => { shown = await json(query()); table.innerHTML = eventRows(shown); };
+  document.getElementById("older").onclick = async () => {
+    const last = shown.filter((e) => e.id !== undefined).at(-1);
+    if (!last) return;
+    shown = shown.concat(await json(query(last.id)));
+    table.innerHTML = eventRows(shown);
+  };
+  for (const f of ["rig", "level", "state"]) document.getElementById(f).onchange = first;
+  await first();
+  setInterval(async () => { if (shown.length <= 50) await first(); }, 2000);
+}
+
+// -- health ------------------------------------------------------------------------------------
+
+async function healthPage() {
+  const draw = async () => {
+    const s = await json("/api/status");
+    const row = (k, v) => `<tr><th>${esc(k)}</th><td>${esc(v)}</td></tr>`;
+    const rigs = s.rigs.map((r) => `<section class="card" data-rig="${esc(r.name)}"><div class="head"><h2>${esc(r.name)}</h2>${badge(r.health)}
+      <span class="where">${esc(r.source)}</span></div><div class="body scroll"><table>
+      ${row("state", r.state)}${row("frames/s", num(r.fps, 2))}${row("last frame", `${num(r.last_frame_age_s, 2)} s ago`)}
+      ${row("frames", r.frames)}${row("reconnects", r.reconnects)}${row("stalls", r.stalls)}
+      ${row("seconds without data", r.seconds_without_data)}${row("pairs dropped", r.dropped)}
+      ${row("shutter (FFC)", r.ffc ? "closed" : "open")}${row("sensor (VOx)", r.vox_temp_c === null ? "not told" : `${num(r.vox_temp_c, 2)} °C`)}
+      ${row("pipeline", `${num(r.pipeline_ms.median, 1)} ms median, ${num(r.pipeline_ms.p99, 1)} ms p99`)}
+      ${row("last error", r.last_error || "–")}${row("last recovery", r.last_recovery || "–")}</table></div></section>`).join("");
+    const st = s.storage;
+    main.innerHTML = `<p>Up ${num(s.uptime_s / 3600, 2)} h, thermodepth ${esc(s.version)}.
+      <a href="/metrics">Prometheus metrics</a> · <a href="/api/openapi.json">API schema</a></p>
+      <div class="grid">${rigs}</div><h3>Storage</h3><table>
+      ${row("path", st.path)}${row("free", `${num(st.free_bytes / 1e9, 1)} GB`)}${row("event store", `${num(st.event_store_bytes / 1e6, 1)} MB`)}
+      ${row("events not yet stored", st.events_not_stored)}${row("deleted", `${st.deleted.continuous} recordings, ${st.deleted.clips} clips`)}
+      ${row("storage fault", st.fault ? "raised" : "no")}</table>
+      <h3>Latency, capture to alarm</h3><table>${Object.entries(s.latency_s).map(([k, v]) =>
+        row(k.replace("_", " "), v.n ? `${num(v.median * 1e3, 1)} ms median, ${num(v.p99 * 1e3, 1)} ms p99 (${v.n})` : "–")).join("")}</table>
+      <h3>MQTT</h3><p>${s.mqtt ? esc(`${s.mqtt.broker}/${s.mqtt.prefix}: ${s.mqtt.sent} sent, ${s.mqtt.unacknowledged} waiting`) : "none"}</p>`;
+  };
+  await draw();
+  setInterval(draw, 2000);
+}
+
+await whoAmI();
+({ overview, rig: rigPage, events: eventsPage, health: healthPage })[page]();
