@@ -93,7 +93,7 @@ def test_a_config_checks_sources_settings_and_who_may_listen(tmp_path: Path) -> 
     assert lines[5] == "rigs.3 (s).pace: only a recording: source has a pace to choose"
     assert lines[6] == (
         "http.listen: 0.0.0.0:8088 is reachable from other machines: give http.token_file "
-        "(a bearer token), or listen on 127.0.0.1"
+        "(or THERMODEPTH_HTTP_TOKEN), or listen on 127.0.0.1"
     )
     assert (
         lines[7] == "mqtt.url: 'mqtt://broker': give a topic prefix without wildcards (/plant/rig1)"
