@@ -346,7 +346,8 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         return Response(generate_latest(registry), media_type=CONTENT_TYPE_LATEST)
 
     async def openapi(request: Request) -> Response:
-        return schemas.OpenAPIResponse(request=request)
+        # Starlette's own response is YAML; the path promises JSON.
+        return _json(schemas.get_schema(routes=request.app.routes))
 
     routes = [
         *(Route(path, page(name)) for path, name in PAGES.items()),
@@ -409,6 +410,7 @@ class HttpServer:
             raise InputError(
                 f"http.listen: {self.host}:{self.port}: cannot listen ({exc.strerror or exc})"
             ) from None
+        sock.listen(128)  # so that a client early on waits in the queue, not refused
         self.port = sock.getsockname()[1]  # the one given, or the one found for 0
         self._thread = threading.Thread(
             target=self.server.run, kwargs={"sockets": [sock]}, name="http", daemon=True
