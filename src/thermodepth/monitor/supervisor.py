@@ -227,11 +227,17 @@ class RigRunner:
         except ValueError:
             raise AckRefusedError(409, f"{self.name}: {rule!r} is not raised") from None
 
-    def raised(self) -> list[dict[str, str]]:
-        """The alarms and sensor faults raised now, with their levels."""
-        out = []
+    def raised(self) -> list[dict[str, Any]]:
+        """The alarms and sensor faults raised now, with their levels and, once
+        acknowledged, by whom and when (``acknowledged``: ``by``, ``at_utc``)."""
+        out: list[dict[str, Any]] = []
         if self.pipeline is not None:
-            levels = {r.name: r.level for r in self.pipeline.alarms.rules}
-            out = [{"rule": n, "level": levels[n]} for n in self.pipeline.alarms.raised]
+            alarms = self.pipeline.alarms
+            for rule in alarms.rules:
+                state = alarms.states[rule.name]
+                if state.raised:
+                    out.append({"rule": rule.name, "level": rule.level})
+                    if state.acknowledged is not None:
+                        out[-1]["acknowledged"] = dict(state.acknowledged)
         out += [{"rule": SENSOR_FAULT, "level": "alarm", "fault": f} for f in self.watch.raised]
         return out

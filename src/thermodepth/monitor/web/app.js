@@ -36,7 +36,8 @@ function alarmList(rig, withButtons) {
   if (!rig.active_alarms.length) return `<p class="muted">No active alarm.</p>`;
   return `<ul class="alarms">${rig.active_alarms.map((a) => `<li data-alarm="${esc(a.rule)}">${badge(a.level)}
     <strong>${esc(a.rule)}</strong>${a.fault ? ` <span class="muted">${esc(a.fault)}</span>` : ""}
-    ${withButtons ? `<button data-ack="${esc(a.rule)}">Acknowledge</button>` : ""}</li>`).join("")}</ul>`;
+    ${a.acknowledged ? `<span class="muted" data-acknowledged>acknowledged by ${esc(a.acknowledged.by)}</span>`
+      : withButtons ? `<button data-ack="${esc(a.rule)}">Acknowledge</button>` : ""}</li>`).join("")}</ul>`;
 }
 
 // Live pictures: the next one asked for once the last has arrived, at 2 Hz at most.
