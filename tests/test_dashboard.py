@@ -101,7 +101,9 @@ def test_evidence_by_event_id_and_nothing_by_a_path(running: Any, tmp_path: Path
     event = next(e for e in monitor.store.events(1000) if e.get("clip"))
     wait_for(lambda: (folder / "store" / "clips" / event["clip"] / "overlay.png").exists(), 20)
     with client(monitor, headers=BEARER) as c:
-        assert c.get(f"/api/events/{event['id']}").json()["clip"] == event["clip"]
+        one = c.get(f"/api/events/{event['id']}").json()
+        assert one["clip"] == event["clip"]
+        assert one["evidence"] == ["snapshot.png", "clip.zip", "cloud.ply"]
         png = c.get(f"/api/events/{event['id']}/snapshot.png")
         assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
         ply = c.get(f"/api/events/{event['id']}/cloud.ply")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import socket
+import sqlite3
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -164,15 +165,26 @@ def test_the_schema_is_versioned_and_migrated(tmp_path: Path) -> None:
     assert newer.db.execute("SELECT shift FROM events").fetchall() == [("night",)]
     assert newer.count() == 1
     newer.close()
-    with pytest.raises(InputError, match=r"event store of version 2, newer than this "
-                       r"thermodepth reads \(1\): upgrade thermodepth"):  # fmt: skip
+    n = len(MIGRATIONS)
+    with pytest.raises(InputError, match=rf"event store of version {n + 1}, newer than this "
+                       rf"thermodepth reads \({n}\): upgrade thermodepth"):  # fmt: skip
         EventStore(path)
     broken = tmp_path / "b.sqlite"
     EventStore(broken).close()
-    with pytest.raises(InputError, match=r"cannot migrate the event store from version 1 to 2 "
-                       r"\(no such table: nowhere\)"):  # fmt: skip
+    with pytest.raises(InputError, match=rf"cannot migrate the event store from version {n} to "
+                       rf"{n + 1} \(no such table: nowhere\)"):  # fmt: skip
         EventStore(broken, (*MIGRATIONS, "ALTER TABLE nowhere ADD COLUMN x"))
-    assert EventStore(broken).version == 1  # a failed step leaves the file as it was
+    assert EventStore(broken).version == n  # a failed step leaves the file as it was
+    first = EventStore(tmp_path / "v1.sqlite", MIGRATIONS[:1])  # as the first monitor wrote it
+    first.db.execute("INSERT INTO events (rig, rule, level, state, time_utc, body) "
+                     "VALUES ('a', 'hot', 'alarm', 'alarm', 'T', '{}')")  # fmt: skip
+    first.close()
+    now = EventStore(tmp_path / "v1.sqlite")
+    assert now.version == n and now.count() == 1
+    now.add({**event(2), "origin": "edge1/a#7"})
+    with pytest.raises(sqlite3.IntegrityError):
+        now.add({**event(3), "origin": "edge1/a#7"})  # a central dashboard's copy: once
+    now.close()
 
 
 def test_a_file_that_is_not_a_store_is_one_line(tmp_path: Path) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import ipaddress
 import os
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
@@ -107,11 +108,13 @@ class HttpConfig(StrictSchema):
 
 class MqttConfig(MqttSettings):
     """The broker: ``url`` (``mqtt://[USER@]HOST[:PORT]/PREFIX``, as ``run --mqtt`` takes
-    it; each rig publishes under ``PREFIX/RIG/``), the settings' ``mqtt`` keys, and
-    ``homeassistant`` (publish Home Assistant's discovery configs under
-    ``discovery_prefix``)."""
+    it; each rig publishes under ``PREFIX/RIG/``), the settings' ``mqtt`` keys,
+    ``snapshots_hz`` (each rig's live pictures published at most so often, for a central
+    dashboard; 0: none) and ``homeassistant`` (publish Home Assistant's discovery configs
+    under ``discovery_prefix``)."""
 
     url: str
+    snapshots_hz: float = Field(default=1.0, ge=0, le=10)
     homeassistant: bool = False
     discovery_prefix: str = Field(default="homeassistant", pattern=r"^[^#+]+$")
 
@@ -245,6 +248,36 @@ def _rig_problems(i: int, rig: RigConfig) -> list[str]:
     return problems
 
 
+def http_problems(
+    http: HttpConfig, key: Callable[[str], str] = lambda name: f"http.{name}"
+) -> list[str]:
+    """What is wrong with an HTTP server's settings, one line each (``key``: how a setting
+    is named to the user, ``http.listen`` in a config): its address, a token where it
+    listens beyond this machine, its TLS files, its token file."""
+    problems: list[str] = []
+    if http.listen is not None:
+        try:
+            if not http.loopback() and http.token_file is None and not os.environ.get(TOKEN_ENV):
+                problems.append(
+                    f"{key('listen')}: {http.listen} is reachable from other machines: give "
+                    f"{key('token_file')} (or {TOKEN_ENV}), or listen on 127.0.0.1"
+                )
+        except ValueError as exc:
+            problems.append(f"{key('listen')}: {str(exc).removeprefix('listen: ')}")
+    if (http.tls_cert is None) != (http.tls_key is None):
+        problems.append(f"{key('tls_cert')} and {key('tls_key')} go together")
+    for name in ("tls_cert", "tls_key"):
+        path = getattr(http, name)
+        if path is not None and not path.is_file():
+            problems.append(f"{key(name)}: {path}: no such file")
+    if http.token_file is not None:
+        try:
+            read_token(http.token_file)
+        except InputError as exc:
+            problems.append(f"{key('token_file')}: {exc}")
+    return problems
+
+
 def config_problems(config: MonitorConfig) -> list[str]:
     """Every problem of a valid-looking config, one line each: rig names twice, sources,
     settings files, the listen address, a token where one is needed, the broker's URL and
@@ -255,27 +288,7 @@ def config_problems(config: MonitorConfig) -> list[str]:
         problems.append(f"rigs: names must differ: {', '.join(map(repr, twice))} twice")
     for i, rig in enumerate(config.rigs):
         problems.extend(_rig_problems(i, rig))
-    http = config.http
-    if http.listen is not None:
-        try:
-            if not http.loopback() and http.token_file is None and not os.environ.get(TOKEN_ENV):
-                problems.append(
-                    f"http.listen: {http.listen} is reachable from other machines: give "
-                    f"http.token_file (or {TOKEN_ENV}), or listen on 127.0.0.1"
-                )
-        except ValueError as exc:
-            problems.append(f"http.{exc}")
-    if (http.tls_cert is None) != (http.tls_key is None):
-        problems.append("http: tls_cert and tls_key go together")
-    for name in ("tls_cert", "tls_key"):
-        path = getattr(http, name)
-        if path is not None and not path.is_file():
-            problems.append(f"http.{name}: {path}: no such file")
-    if http.token_file is not None:
-        try:
-            read_token(http.token_file)
-        except InputError as exc:
-            problems.append(f"http.token_file: {exc}")
+    problems.extend(http_problems(config.http))
     if config.mqtt is not None:
         try:
             MqttTarget.parse(config.mqtt.url)

@@ -85,6 +85,8 @@ class Monitor(Protocol):
 
     def evidence_file(self, event_id: int, what: str) -> Path | None: ...
 
+    def evidence_of(self, event: dict[str, Any]) -> list[str]: ...
+
     def picture(self, rig: str, what: str, width: int | None) -> bytes | None: ...
 
     def trend(self, rig: str) -> list[dict[str, Any]] | None: ...
@@ -120,6 +122,7 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
     from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
     from starlette.applications import Starlette
     from starlette.background import BackgroundTask
+    from starlette.concurrency import run_in_threadpool
     from starlette.responses import FileResponse, HTMLResponse, RedirectResponse, Response
     from starlette.routing import Mount, Route
     from starlette.schemas import SchemaGenerator
@@ -212,7 +215,8 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
           - {name: before, in: query, description: only older than this id,
              schema: {type: integer}}
         responses:
-          200: {description: events, newest first}
+          200: {description: "events, newest first, each with the evidence this server
+            gives for it (evidence: snapshot.png, clip.zip, cloud.ply)"}
           400: {description: a bad parameter}
         """
         you = who(request)
@@ -227,7 +231,7 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         except ValueError:
             return _error("limit and before are whole numbers, limit >= 1", 400)
         found = monitor.events(limit, q.get("rig"), before, q.get("level"), q.get("state"))
-        return _json(found)
+        return _json([{**e, "evidence": monitor.evidence_of(e)} for e in found])
 
     async def event(request: Request) -> Response:
         """
@@ -239,7 +243,9 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         if not isinstance(you, Identity):
             return you
         found = monitor.event(request.path_params["id"])
-        return _json(found) if found is not None else _error("no such event", 404)
+        if found is None:
+            return _error("no such event", 404)
+        return _json({**found, "evidence": monitor.evidence_of(found)})
 
     def evidence(request: Request) -> Response:
         """
@@ -335,7 +341,9 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         if not by:
             return _error("by: say who acknowledges", 400)
         try:
-            return _json(monitor.acknowledge(body["rig"], body["rule"], by))
+            # a central dashboard waits for the rig's monitor: not on the event loop
+            events = await run_in_threadpool(monitor.acknowledge, body["rig"], body["rule"], by)
+            return _json(events)
         except AckRefusedError as exc:
             return _error(exc.message, exc.status)
 
@@ -351,7 +359,7 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
 
     routes = [
         *(Route(path, page(name)) for path, name in PAGES.items()),
-        Route("/rig/{rig}", page("rig.html")),
+        Route("/rig/{rig:path}", page("rig.html")),
         Route("/login", login_page),
         Route("/login", login, methods=["POST"]),
         Route("/logout", logout, methods=["POST"]),
@@ -361,8 +369,8 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         Route("/api/events", events),
         Route("/api/events/{id:int}", event),
         Route("/api/events/{id:int}/{what}", evidence),
-        Route("/api/rigs/{rig}/trend", trend),
-        Route("/api/rigs/{rig}/{what}", picture),
+        Route("/api/rigs/{rig:path}/trend", trend),  # a central dashboard's rigs: EDGE/RIG
+        Route("/api/rigs/{rig:path}/{what}", picture),
         Route("/api/ack", ack, methods=["POST"]),
         Route("/api/openapi.json", openapi, include_in_schema=False),
         Route("/metrics", metrics),

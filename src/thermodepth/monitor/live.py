@@ -104,6 +104,24 @@ def encode(img: NDArray[np.uint8], kind: str, width: int | None = None) -> bytes
 
 
 @dataclass
+class Trend:
+    """A rig's readings, one every :data:`TREND_EVERY_S` over the last :data:`TREND_S`: each
+    ``{"time_s", "hottest_c", "rois": {NAME: max C or None}}``."""
+
+    points: deque[dict[str, Any]] = field(
+        default_factory=lambda: deque(maxlen=int(TREND_S / TREND_EVERY_S))
+    )
+    _at: float = float("-inf")
+
+    def add(self, time_s: float, hottest_c: float | None, rois: dict[str, float | None]) -> None:
+        """Readings at ``time_s``, kept if the last kept is TREND_EVERY_S old (monotonic)."""
+        now = time.monotonic()
+        if now - self._at >= TREND_EVERY_S:
+            self._at = now
+            self.points.append({"time_s": time_s, "hottest_c": hottest_c, "rois": rois})
+
+
+@dataclass
 class LiveView:
     """A rig's latest pictures and trend (module docstring). ``range_c``: the colour scale
     (None: fixed from the first frame with temperatures); ``rois``: outlined."""
@@ -113,10 +131,7 @@ class LiveView:
     frame: FusedFrame | None = None
     wanted_until: float = 0.0
     last_s: float = 0.0
-    trend: deque[dict[str, Any]] = field(
-        default_factory=lambda: deque(maxlen=int(TREND_S / TREND_EVERY_S))
-    )
-    _trend_at: float = 0.0
+    trend: Trend = field(default_factory=Trend)
     _cache: dict[tuple[int, str, int | None], bytes] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
@@ -124,14 +139,10 @@ class LiveView:
         """A rig's fused frame (its own thread): kept for the screens while someone looks,
         its depth grid sampled here; its readings into the trend every TREND_EVERY_S."""
         now = time.monotonic()
-        if now - self._trend_at >= TREND_EVERY_S and not fused.in_ffc:
-            self._trend_at = now
+        if not fused.in_ffc:
             hot = fused.hotspots[0].max_c if fused.hotspots else None
-            self.trend.append({
-                "time_s": fused.thermal_time_s,
-                "hottest_c": hot,
-                "rois": {r.name: (r.max_c if r.n else None) for r in fused.rois},
-            })  # fmt: skip
+            rois = {r.name: (r.max_c if r.n else None) for r in fused.rois}
+            self.trend.add(fused.thermal_time_s, hot, rois)
         if now > self.wanted_until or now - self.last_s < 1.0 / LIVE_HZ:
             return
         self.last_s = now

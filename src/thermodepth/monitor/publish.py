@@ -12,6 +12,10 @@ Topics under the URL's prefix ``P`` (``mqtt://broker/plant`` -> ``plant/line1/al
   :data:`STATUS_EVERY_S` and when its state changes.
 - ``P/RIG/alarm_states``: ``{"RULE": "ON" or "OFF", ...}``, retained, at start and at every
   event of the rig.
+- ``P/RIG/snapshot/overlay.jpg`` and ``P/RIG/snapshot/thermal.png``: the rig's live overlay
+  (JPEG, :data:`SNAPSHOT_WIDTH` pixels wide) and thermal image (PNG) as the dashboard draws
+  them, raw bytes, retained, QoS 0, at most ``snapshots_hz`` a second (0: none), for a
+  central dashboard (``thermodepth dashboard``) that cannot read the monitor's disk.
 - ``P/RIG/ack``: acknowledge a raised alarm, ``{"rule": "hot", "by": "jane"}``; the answer on
   ``P/RIG/ack/result`` (``{"ok": true, "events": [...]}`` or ``{"ok": false, "error": ...}``).
 - ``P/monitor/alarms``: the monitor's own events (storage faults); ``P/monitor/status``:
@@ -36,14 +40,19 @@ from .store import EventStore
 from .supervisor import AckRefusedError
 
 STATUS_EVERY_S = 10.0
+SNAPSHOT_WIDTH = 640
+SNAPSHOTS = {"overlay.jpg": ("overlay", SNAPSHOT_WIDTH), "thermal.png": ("thermal", None)}
+"""A snapshot topic's leaf: the picture (:meth:`~.live.LiveView.picture`) and its width."""
 Acknowledge = Callable[[str, str, str], list[dict[str, Any]]]
+Picture = Callable[[str, str, int | None], bytes | None]
 
 
 class MonitorPublisher:
     """The monitor's broker connection (module docstring), for the rigs of ``entities`` (and
     their Home Assistant discovery when the config asks). ``acknowledge(rig, rule, by)``:
     what an acknowledge command does; ``published(event)``: told when the broker has an
-    event; ``log``: one line each of what happens."""
+    event; ``picture(rig, what, width)``: a rig's live picture, for the snapshots; ``log``:
+    one line each of what happens."""
 
     def __init__(
         self,
@@ -52,11 +61,13 @@ class MonitorPublisher:
         entities: list[RigEntities],
         acknowledge: Acknowledge,
         published: Callable[[dict[str, Any]], None],
+        picture: Picture,
         log: Callable[[str], None],
     ) -> None:
         self.config, self.store, self.entities = config, store, entities
         self.rigs = [e.name for e in entities]
         self.acknowledge, self.published, self.log = acknowledge, published, log
+        self.picture = picture
         self.target = MqttTarget.parse(config.url)
         will = json.dumps({"state": "died"})
         self.connection = MqttConnection(
@@ -71,7 +82,11 @@ class MonitorPublisher:
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._last_measurement: dict[str, float] = {}
-        self._thread = threading.Thread(target=self._drain, name="mqtt outbox", daemon=True)
+        self._threads = [threading.Thread(target=self._drain, name="mqtt outbox", daemon=True)]
+        if config.snapshots_hz > 0:
+            self._threads.append(
+                threading.Thread(target=self._snapshots, name="mqtt snapshots", daemon=True)
+            )
 
     def topic(self, rig: str, leaf: str) -> str:
         return f"{self.target.prefix}/{rig}/{leaf}"
@@ -87,7 +102,8 @@ class MonitorPublisher:
         if self.config.homeassistant:
             prefix, where = self.target.prefix, self.config.discovery_prefix
             Discovery(self.connection, prefix, where, self.entities, self.log).start()
-        self._thread.start()
+        for thread in self._threads:
+            thread.start()
 
     def _status(self, rig: str, status: dict[str, Any]) -> None:
         payload = json.dumps(jsonable(status))
@@ -127,6 +143,17 @@ class MonitorPublisher:
         ok = self.connection.publish(self.topic(event["rig"], "alarms"), payload, 1, on_ack=acked)
         self.sent += ok
         return ok
+
+    def _snapshots(self) -> None:
+        every_s = 1.0 / self.config.snapshots_hz
+        while not self._stop.wait(every_s):
+            if not self.connection.connected:
+                continue  # QoS 0: a picture not sent now is worth nothing later
+            for rig in self.rigs:
+                for leaf, (what, width) in SNAPSHOTS.items():
+                    data = self.picture(rig, what, width)
+                    if data is not None:
+                        self.connection.publish(self.topic(rig, f"snapshot/{leaf}"), data, 0, True)
 
     def publish_direct(self, event: dict[str, Any]) -> None:
         """An event the store could not keep: sent from memory."""
@@ -171,8 +198,9 @@ class MonitorPublisher:
     def stop(self, reason: str = "stopped") -> None:
         self._stop.set()
         self._wake.set()
-        if self._thread.is_alive():
-            self._thread.join(5.0)
+        for thread in self._threads:
+            if thread.is_alive():
+                thread.join(5.0)
         self._status(MONITOR, {"state": reason, "until_utc": utc_now()})
         self.connection.close(wait_s=5.0)
 

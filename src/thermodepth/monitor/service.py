@@ -52,6 +52,10 @@ def utc_of(time_s: float) -> str:
     return datetime.fromtimestamp(time_s, timezone.utc).isoformat(timespec="milliseconds")
 
 
+EVIDENCE_FILES = {"snapshot.png": "overlay.png", "clip.zip": "clip.zarr", "cloud.ply": "frame.ply"}
+"""An event's evidence by the name the API gives it: its file in the event's clip folder."""
+
+
 class Monitor:
     """The monitor of ``config`` (module docstring); ``log``: one line each of what happens.
     ``start`` and ``stop`` it; ``reload`` a new config while it runs."""
@@ -106,6 +110,7 @@ class Monitor:
             self.entities(),
             self.acknowledge,
             self._published,
+            self.picture,
             self.log,
         )
 
@@ -408,6 +413,7 @@ class Monitor:
         watchdog_s = watchdog_interval_s()
         last = time.monotonic()
         last_dog = last_status = last_opcua = float("-inf")
+        last_told: dict[str, tuple[str, str]] = {}  # each rig's state and health, as published
         while not self._stop.wait(TICK_S):
             now = time.monotonic()
             dt, last = now - last, now
@@ -423,10 +429,15 @@ class Monitor:
                     last_opcua = now
                     for r in self.status()["rigs"]:
                         self.opcua.status(r)
-            if self.publisher is not None and now - last_status >= STATUS_EVERY_S:
-                last_status = now
-                for r in self.status()["rigs"]:
-                    self.publisher.rig_status(r["name"], r)
+            if self.publisher is not None:
+                stale = set(self.stale_rigs())
+                told = {
+                    r.name: (r.status.state, self._health(r, stale)) for r in self.runners.values()
+                }
+                if now - last_status >= STATUS_EVERY_S or told != last_told:
+                    last_status, last_told = now, told
+                    for r in self.status()["rigs"]:
+                        self.publisher.rig_status(r["name"], r)
 
     def _watch(self, runner: RigRunner, now_mono: float, dt: float) -> None:
         s = runner.status
@@ -483,6 +494,11 @@ class Monitor:
             and (r.status.state != "running" or r.status.age_s(now) >= r.config.stall_s)
         ]
 
+    @staticmethod
+    def _health(runner: RigRunner, stale: set[str]) -> str:
+        """``stale`` (no fresh data), ``fault`` (a sensor fault raised) or ``ok``."""
+        return "stale" if runner.name in stale else "fault" if runner.watch.raised else "ok"
+
     def status(self) -> dict[str, Any]:
         """Everything ``/api/status`` tells (module docstring of :mod:`.http`)."""
         now = time.monotonic()
@@ -492,7 +508,7 @@ class Monitor:
             d = r.status.as_dict(now)
             d["up"] = int(r.name not in stale)
             d["active_alarms"] = r.raised()
-            d["health"] = "stale" if r.name in stale else "fault" if r.watch.raised else "ok"
+            d["health"] = self._health(r, stale)
             d["temp_range_c"] = r.live.range_c
             rigs.append(d)
         path = self.config.storage.path
@@ -564,14 +580,15 @@ class Monitor:
             return None
         root = (self.config.storage.path / CLIPS).resolve()
         folder = (root / str(event["clip"])).resolve()
-        if not folder.is_relative_to(root) or folder == root:
+        if not folder.is_relative_to(root) or folder == root or what not in EVIDENCE_FILES:
             return None
-        path = {
-            "snapshot.png": folder / "overlay.png",
-            "cloud.ply": folder / "frame.ply",
-            "clip.zip": folder / "clip.zarr",
-        }.get(what)
-        return path if path is not None and path.exists() else None
+        path = folder / EVIDENCE_FILES[what]
+        return path if path.exists() else None
+
+    def evidence_of(self, event: dict[str, Any]) -> list[str]:
+        """What :meth:`evidence_file` may give for an event: all of it while its clip is
+        kept, nothing otherwise."""
+        return list(EVIDENCE_FILES) if event.get("clip") and event.get("clip_kept", True) else []
 
     def picture(self, rig: str, what: str, width: int | None = None) -> bytes | None:
         """A rig's latest ``overlay`` (JPEG) or ``thermal`` (PNG) picture (:mod:`.live`)."""
@@ -581,4 +598,4 @@ class Monitor:
     def trend(self, rig: str) -> list[dict[str, Any]] | None:
         """A rig's readings over the last hour (:mod:`.live`)."""
         runner = self.runners.get(rig)
-        return None if runner is None else list(runner.live.trend)
+        return None if runner is None else list(runner.live.trend.points)

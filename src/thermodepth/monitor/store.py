@@ -44,12 +44,17 @@ MIGRATIONS: tuple[str, ...] = (
     CREATE INDEX events_by_clip ON events (clip);
     CREATE TABLE outbox (event_id INTEGER PRIMARY KEY REFERENCES events (id));
     """,
+    # a central dashboard's copy of an event names where it came from, and keeps it once
+    """
+    ALTER TABLE events ADD COLUMN origin TEXT;
+    CREATE UNIQUE INDEX events_by_origin ON events (origin);
+    """,
 )
 """Version N+1 of the schema from version N (the first: from an empty file)."""
 
 COLUMNS = (
     *("rig", "rule", "level", "state", "time_utc", "time_s", "frame", "value_c"),
-    *("condition", "fault", "clip", "by", "at_utc"),
+    *("condition", "fault", "clip", "by", "at_utc", "origin"),
 )
 
 
@@ -100,7 +105,7 @@ class EventStore:
         """Write an event (a dict with ``rig``, ``rule``, ``level``, ``event``, ``time_utc``
         and what else it tells); with ``outbox`` it also waits in the outbox until
         :meth:`delivered`. Returns its id. sqlite3.Error when it cannot be written (a full
-        disk)."""
+        disk); sqlite3.IntegrityError when one of the same ``origin`` is there already."""
         row = {k: event.get(k) for k in COLUMNS}
         row["state"] = event["event"]
         values = [row[k] for k in COLUMNS]

@@ -278,7 +278,7 @@ class MqttConnection:
     def publish(
         self,
         topic: str,
-        payload: str,
+        payload: str | bytes,
         qos: int = 0,
         retain: bool = False,
         on_ack: Callable[[], None] | None = None,

@@ -125,7 +125,7 @@ function spark(values) {
 }
 
 async function rigPage() {
-  const name = decodeURIComponent(location.pathname.split("/").pop());
+  const name = decodeURIComponent(location.pathname.slice("/rig/".length));
   document.title = `thermodepth · ${name}`;
   main.innerHTML = `<h2>${esc(name)} <span id="state"></span> <span class="muted" id="where"></span></h2>
     <div class="two"><div><img class="live" id="overlay" alt="live overlay"><div id="scale"></div></div>
@@ -167,10 +167,13 @@ function eventRows(events) {
   const head = `<tr><th>when</th><th>rig</th><th>rule</th><th>level</th><th>state</th><th>value</th><th>what</th><th>evidence</th></tr>`;
   return head + events.map((e) => {
     const id = e.id;
-    const evidence = e.clip && e.clip_kept !== false && id !== undefined
-      ? `<a href="/api/events/${id}/snapshot.png"><img class="thumb" loading="lazy" src="/api/events/${id}/snapshot.png" alt="snapshot" onerror="this.replaceWith('overlay')"></a>
-         <a href="/api/events/${id}/clip.zip">clip</a> · <a href="/api/events/${id}/cloud.ply">PLY</a>`
-      : `<span class="muted">${e.clip ? "deleted" : "–"}</span>`;
+    const have = id === undefined ? [] : e.evidence || [];
+    const links = have.filter((n) => n !== "snapshot.png")
+      .map((n) => `<a href="/api/events/${id}/${n}">${n === "clip.zip" ? "clip" : "PLY"}</a>`).join(" · ");
+    const evidence = have.length
+      ? `${have.includes("snapshot.png") ? `<a href="/api/events/${id}/snapshot.png"><img class="thumb" loading="lazy" src="/api/events/${id}/snapshot.png" alt="snapshot" onerror="this.replaceWith('overlay')"></a>` : ""}
+         ${links}`
+      : `<span class="muted">${e.clip ? (e.clip_kept === false ? "deleted" : "clip on its monitor") : "–"}</span>`;
     return `<tr data-event="${id ?? ""}"><td>${esc(when(e))}</td><td>${esc(e.rig)}</td><td>${esc(e.rule)}${e.fault ? ` <span class="muted">${esc(e.fault)}</span>` : ""}</td>
       <td>${badge(e.level)}</td><td>${badge(e.state, e.state === "alarm" || e.state === "escalated" ? e.level : e.state)}</td>
       <td>${e.value_c === null || e.value_c === undefined ? "" : `${num(e.value_c)} °C`}</td>

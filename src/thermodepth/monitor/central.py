@@ -1,0 +1,399 @@
+"""One screen for many monitors: ``thermodepth dashboard --mqtt URL`` serves the monitor's
+pages and API (:mod:`.http`) for every rig that publishes under the URL's prefix, from what
+the monitors publish (:mod:`.publish`) and nothing of their disks.
+
+A rig is named by its topic path under the prefix: a monitor publishing under
+``plant/edge1`` with a rig ``line3``, seen by a dashboard of ``mqtt://broker/plant``, gives
+the rig ``edge1/line3`` (a monitor publishing under ``plant`` itself: ``line3``). What each
+topic gives:
+
+- ``RIG/status`` (retained, every 10 s): the rig's figures, as its monitor's ``/api/status``;
+- ``RIG/measurements`` (1 Hz by default): its hottest reading and ROIs, its freshness, and its
+  trend (:class:`~.live.Trend`);
+- ``RIG/alarms``: its events, kept in the dashboard's own event store (each once, by its
+  monitor's id: delivery is at least once), each raising one with the rig's latest overlay
+  as its snapshot (or its first, for a rig not yet pictured); the active alarms follow them
+  at once (the status may be 10 s old);
+- ``RIG/snapshot/overlay.jpg`` and ``thermal.png``: its live pictures;
+- ``EDGE/monitor/status``: whether the monitor runs (its rigs are stale when it does not);
+- ``RIG/ack/result``: the answer to an acknowledgement sent on ``RIG/ack``.
+
+A rig is stale when its status says so, its monitor is not running, or nothing came from it
+for :data:`SILENT_S`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import shutil
+import sqlite3
+import tempfile
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import __version__
+from ..pipeline import MqttSettings
+from ..sinks.mqtt import MqttConnection, MqttTarget, default_client_id
+from .config import MONITOR
+from .live import Trend, encode
+from .publish import SNAPSHOTS, STATUS_EVERY_S
+from .store import EventStore
+from .supervisor import AckRefusedError
+
+SILENT_S = 2.5 * STATUS_EVERY_S
+ACK_WAIT_S = 5.0
+EVENT_WINS_S = 2.0  # an event newer than this outranks a status published before it
+LEAVES = ("status", "measurements", "alarms", "ack/result", *(f"snapshot/{k}" for k in SNAPSHOTS))
+RAISING = ("alarm", "escalated")
+
+
+@dataclass
+class RemoteRig:
+    """What the dashboard knows of one rig (monotonic times)."""
+
+    status: dict[str, Any] | None = None
+    heard_s: float = float("-inf")
+    measured_s: float = float("-inf")
+    measured: dict[str, Any] | None = None
+    active: dict[str, dict[str, Any]] = field(default_factory=dict)
+    changed_s: dict[str, float] = field(default_factory=dict)  # rule -> its last event's time
+    pictures: dict[str, bytes] = field(default_factory=dict)
+    trend: Trend = field(default_factory=Trend)
+    unpictured: list[int] = field(default_factory=list)  # raised before its first overlay
+
+
+def _decoded(data: bytes) -> NDArray[np.uint8] | None:
+    """A JPEG or PNG as BGR uint8 (None: not a picture)."""
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    return None if img is None else np.asarray(img, dtype=np.uint8)
+
+
+def split_topic(prefix: str, topic: str) -> tuple[str, str] | None:
+    """(rig, leaf) of a topic under ``prefix`` (None: not one of :data:`LEAVES`)."""
+    rel = topic.removeprefix(f"{prefix}/")
+    if rel == topic:
+        return None
+    for leaf in LEAVES:
+        if rel.endswith(f"/{leaf}"):
+            rig = rel[: -len(leaf) - 1]
+            return (rig, leaf) if rig else None
+    return None
+
+
+def monitor_of(rig: str) -> str:
+    """The monitor's own name beside a rig's (``edge1/line3`` -> ``edge1/monitor``)."""
+    parent = rig.rpartition("/")[0]
+    return f"{parent}/{MONITOR}" if parent else MONITOR
+
+
+class CentralDashboard:
+    """The rigs seen on a broker (module docstring), answering what :mod:`.http` asks of a
+    monitor. ``url``: ``mqtt://[USER@]HOST[:PORT]/PREFIX``; ``folder``: its event store and
+    event snapshots; ``settings``: the broker's (password file, CA, timeouts)."""
+
+    def __init__(
+        self, url: str, folder: Path, settings: MqttSettings, log: Callable[[str], None]
+    ) -> None:
+        self.target = MqttTarget.parse(url)
+        self.prefix, self.log = self.target.prefix, log
+        self.folder = folder
+        (folder / "snapshots").mkdir(parents=True, exist_ok=True)
+        self.store = EventStore(folder / "events.sqlite")
+        self.started_s = time.monotonic()
+        self.started_utc = datetime.now(timezone.utc).isoformat(timespec="seconds")
+        self.rigs: dict[str, RemoteRig] = {}
+        self.monitors: dict[str, str] = {}
+        self.event_counts: Counter[tuple[str, str]] = Counter()
+        self.acks_sent = 0
+        self._lock = threading.Lock()
+        self._answers: dict[str, queue.Queue[dict[str, Any]]] = {}
+        self._ack_locks: dict[str, threading.Lock] = {}
+        will = (f"{self.prefix}/dashboard/status", json.dumps({"state": "died"}))
+        client_id = settings.client_id or f"{default_client_id()}-dashboard"
+        self.connection = MqttConnection(self.target, settings, log, will, client_id)
+
+    # -- the broker ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Connect (an InputError line when the broker refuses; a warning when it is away:
+        the pages show every rig stale until it is back) and listen under the prefix."""
+        self.connection.connect(required=False)
+        self.connection.subscribe(f"{self.prefix}/#", self._message)
+        self._say("running")
+
+    def stop(self) -> None:
+        self._say("stopped")
+        self.connection.close(wait_s=2.0)
+        self.store.close()
+
+    def _say(self, state: str) -> None:
+        payload = json.dumps({"state": state, "version": __version__})
+        self.connection.publish(f"{self.prefix}/dashboard/status", payload, 1, True)
+
+    def _message(self, topic: str, payload: bytes) -> None:
+        where = split_topic(self.prefix, topic)
+        if where is None or not payload:
+            return
+        rig, leaf = where
+        if leaf.startswith("snapshot/"):
+            r = self._rig(rig)
+            with self._lock:
+                r.pictures[leaf.removeprefix("snapshot/")] = bytes(payload)
+                unpictured: list[int] = []
+                if leaf.endswith(".jpg"):
+                    unpictured, r.unpictured = r.unpictured, []
+            for event_id in unpictured:
+                self._keep_snapshot(event_id, bytes(payload))
+            return
+        try:
+            message = json.loads(payload)
+        except ValueError:
+            self.log(f"MQTT {topic}: not JSON, ignored")
+            return
+        if not isinstance(message, dict):
+            return
+        if leaf == "status" and rig.rpartition("/")[2] == MONITOR:
+            with self._lock:
+                self.monitors[rig] = str(message.get("state"))
+        elif leaf == "status" and "health" in message:
+            self._status(rig, message)
+        elif leaf == "measurements":
+            self._measured(rig, message)
+        elif leaf == "alarms":
+            self._event(rig, message)
+        elif leaf == "ack/result":
+            waiting = self._answers.get(rig)
+            if waiting is not None:
+                waiting.put(message)
+
+    def _rig(self, rig: str) -> RemoteRig:
+        with self._lock:
+            found = self.rigs.setdefault(rig, RemoteRig())
+        found.heard_s = time.monotonic()
+        return found
+
+    def _status(self, rig: str, status: dict[str, Any]) -> None:
+        r = self._rig(rig)
+        now = time.monotonic()
+        with self._lock:
+            r.status = status
+            said = {a["rule"]: a for a in status.get("active_alarms", [])}
+            for rule in set(said) | set(r.active):
+                if now - r.changed_s.get(rule, float("-inf")) < EVENT_WINS_S:
+                    continue
+                if rule in said:
+                    r.active[rule] = said[rule]
+                else:
+                    r.active.pop(rule, None)
+
+    def _measured(self, rig: str, m: dict[str, Any]) -> None:
+        r = self._rig(rig)
+        r.measured, r.measured_s = m, time.monotonic()
+        hot = m.get("hottest")
+        rois = m.get("rois") or {}
+        r.trend.add(
+            m.get("time_s", 0.0),
+            None if hot is None else hot.get("max_c"),
+            {k: (v.get("max_c") if v.get("n") else None) for k, v in rois.items()},
+        )
+
+    def _event(self, rig: str, event: dict[str, Any]) -> None:
+        r = self._rig(rig)
+        kind, rule = event.get("event"), event.get("rule")
+        if not isinstance(kind, str) or not isinstance(rule, str):
+            self.log(f"MQTT {self.prefix}/{rig}/alarms: not an event, ignored")
+            return
+        copy = {k: v for k, v in event.items() if k not in ("id", "clip_kept")}
+        copy.update(rig=rig, origin=f"{rig}#{event.get('id', time.time_ns())}")
+        copy.setdefault("level", "alarm")
+        copy.setdefault("time_utc", datetime.now(timezone.utc).isoformat())
+        try:
+            event_id = self.store.add(copy)
+        except sqlite3.IntegrityError:
+            return  # had it already (delivered again)
+        with self._lock:
+            self.event_counts[rig, kind] += 1
+            r.changed_s[rule] = time.monotonic()
+            if kind in RAISING:
+                r.active[rule] = {"rule": rule, "level": copy["level"]}
+                if copy.get("fault"):
+                    r.active[rule]["fault"] = copy["fault"]
+            elif kind == "acknowledged" and rule in r.active:
+                r.active[rule]["acknowledged"] = {
+                    "by": copy.get("by"),
+                    "at_utc": copy.get("at_utc"),
+                }
+            elif kind == "clear":
+                r.active.pop(rule, None)
+            overlay = r.pictures.get("overlay.jpg")
+            if kind in RAISING and overlay is None:
+                r.unpictured.append(event_id)  # the rig's first overlay will be its snapshot
+        if kind in RAISING and overlay is not None:
+            self._keep_snapshot(event_id, overlay)
+
+    def _keep_snapshot(self, event_id: int, jpeg: bytes) -> None:
+        """The rig's overlay when its event came, as the event's PNG (renamed into place)."""
+        img = _decoded(jpeg)
+        if img is None:
+            return
+        fd, tmp = tempfile.mkstemp(dir=self.folder / "snapshots", suffix=".part")
+        with os.fdopen(fd, "wb") as f:
+            f.write(encode(img, "png"))
+        os.replace(tmp, self._snapshot_path(event_id))
+
+    def _snapshot_path(self, event_id: int) -> Path:
+        return self.folder / "snapshots" / f"{int(event_id)}.png"
+
+    # -- what the pages ask --------------------------------------------------------------------
+
+    def stale_rigs(self) -> list[str]:
+        """The rigs without fresh data: their status says so, their monitor is not running,
+        or nothing came from them for SILENT_S."""
+        now = time.monotonic()
+        with self._lock:
+            return [
+                name
+                for name, r in sorted(self.rigs.items())
+                if r.status is not None
+                and (
+                    r.status.get("health") == "stale"
+                    or self.monitors.get(monitor_of(name), "running") != "running"
+                    or now - r.heard_s > SILENT_S
+                    or not self.connection.connected
+                )
+            ]
+
+    def status(self) -> dict[str, Any]:
+        """``/api/status`` for every rig heard of (those with a status), with the dashboard's
+        own storage and broker, and each monitor's state."""
+        now = time.monotonic()
+        stale = set(self.stale_rigs())
+        rigs = []
+        with self._lock:
+            for name, r in sorted(self.rigs.items()):
+                if r.status is None:
+                    continue
+                d = {**r.status, "name": name, "monitor": monitor_of(name)}
+                if r.measured is not None:
+                    m = r.measured
+                    d["hottest"] = m.get("hottest")
+                    d["rois"] = m.get("rois") or {}
+                    d["vox_temp_c"] = m.get("vox_temp_c")
+                    d["last_frame_age_s"] = round(now - r.measured_s, 2)
+                d["active_alarms"] = [dict(a) for a in r.active.values()]
+                d["up"] = int(name not in stale)
+                d["health"] = "stale" if name in stale else r.status.get("health", "ok")
+                rigs.append(d)
+            monitors = dict(sorted(self.monitors.items()))
+            counts = dict(self.event_counts)
+        try:
+            free = shutil.disk_usage(self.folder).free
+        except OSError:
+            free = 0
+        return {
+            "version": __version__,
+            "started_utc": self.started_utc,
+            "uptime_s": round(now - self.started_s, 1),
+            "central": True,
+            "rigs": rigs,
+            "monitors": monitors,
+            "storage": {
+                "path": str(self.folder),
+                "free_bytes": free,
+                "event_store_bytes": self.store.size_bytes(),
+                "events_not_stored": 0,
+                "pictures_skipped": 0,
+                "deleted": {"continuous": 0, "clips": 0},
+                "fault": False,
+            },
+            "mqtt": {
+                "broker": self.target.where,
+                "prefix": self.prefix,
+                "sent": self.acks_sent,
+                "unacknowledged": self.connection.pending,
+            },
+            "event_counts": {
+                rig: {state: n for (r, state), n in counts.items() if r == rig}
+                for rig in sorted({r for r, _ in counts})
+            },
+            "latency_s": {},
+        }
+
+    def events(
+        self,
+        limit: int = 100,
+        rig: str | None = None,
+        before_id: int | None = None,
+        level: str | None = None,
+        state: str | None = None,
+    ) -> list[dict[str, Any]]:
+        """The newest events kept (``/api/events``)."""
+        return self.store.events(limit, rig, before_id, level, state)
+
+    def event(self, event_id: int) -> dict[str, Any] | None:
+        return self.store.event(event_id)
+
+    def evidence_of(self, event: dict[str, Any]) -> list[str]:
+        """The snapshot, when one was kept: the clip and cloud stay on the monitor's disk."""
+        return ["snapshot.png"] if self._snapshot_path(event["id"]).exists() else []
+
+    def evidence_file(self, event_id: int, what: str) -> Path | None:
+        path = self._snapshot_path(event_id)
+        return path if what == "snapshot.png" and path.exists() else None
+
+    def picture(self, rig: str, what: str, width: int | None = None) -> bytes | None:
+        """A rig's latest published ``overlay`` (JPEG) or ``thermal`` (PNG) picture, made
+        smaller when ``width`` asks."""
+        leaf = next(k for k, (w, _) in SNAPSHOTS.items() if w == what)
+        with self._lock:
+            r = self.rigs.get(rig)
+            data = None if r is None else r.pictures.get(leaf)
+        if data is None or width is None:
+            return data
+        img = _decoded(data)
+        if img is None or width >= img.shape[1]:
+            return data
+        return encode(img, "jpeg" if leaf.endswith(".jpg") else "png", width)
+
+    def trend(self, rig: str) -> list[dict[str, Any]] | None:
+        with self._lock:
+            r = self.rigs.get(rig)
+            return None if r is None else list(r.trend.points)
+
+    def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]:
+        """Acknowledge through the rig's command topic and wait for its monitor's answer:
+        its events, or AckRefusedError (404 no such rig, 409 refused by the monitor, 504 no
+        answer within ACK_WAIT_S)."""
+        with self._lock:
+            if self.rigs.get(rig) is None or self.rigs[rig].status is None:
+                raise AckRefusedError(404, f"no rig {rig!r}")
+            one_at_a_time = self._ack_locks.setdefault(rig, threading.Lock())
+        with one_at_a_time:  # the answers of a rig come on one topic
+            answers: queue.Queue[dict[str, Any]] = queue.Queue()
+            self._answers[rig] = answers
+            try:
+                payload = json.dumps({"rule": rule, "by": by})
+                self.connection.publish(f"{self.prefix}/{rig}/ack", payload, 1)
+                self.acks_sent += 1
+                reply = answers.get(timeout=ACK_WAIT_S)
+            except queue.Empty:
+                raise AckRefusedError(
+                    504, f"{rig}: its monitor did not answer within {ACK_WAIT_S:g} s"
+                ) from None
+            finally:
+                self._answers.pop(rig, None)
+        if not reply.get("ok"):
+            raise AckRefusedError(409, str(reply.get("error", "refused")))
+        return list(reply.get("events", []))

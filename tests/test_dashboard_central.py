@@ -1,0 +1,207 @@
+"""One screen for many monitors (``thermodepth dashboard``): what arrives on the broker, as
+the monitors publish it, becomes rigs, readings, active alarms, events (each once) with their
+snapshots, live pictures and trends; and, on a real Mosquitto, two monitors of one rig each
+and one central dashboard: both rigs on its API, their pictures, an alarm acknowledged
+through it into the rig's own monitor, a stopped monitor's rig stale."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette", reason="the dashboard needs the monitor extra (starlette)")
+pytest.importorskip("paho.mqtt.client", reason="the dashboard's MQTT needs the mqtt extra")
+
+import httpx
+
+import mqtt_broker
+from monitor_helpers import monitor_config, settings_file, wait_for
+from thermodepth.app.monitor import run_dashboard
+from thermodepth.errors import InputError
+from thermodepth.monitor import Monitor, load_config
+from thermodepth.monitor.central import CentralDashboard, monitor_of, split_topic
+from thermodepth.monitor.config import HttpConfig
+from thermodepth.monitor.http import HttpServer
+from thermodepth.monitor.supervisor import AckRefusedError
+from thermodepth.pipeline import MqttSettings
+from thermodepth.sinks.mqtt import PASSWORD_ENV
+
+
+def jpeg(width: int, height: int, value: int) -> bytes:
+    ok, data = cv2.imencode(".jpg", np.full((height, width, 3), value, np.uint8))
+    assert ok
+    return bytes(data)
+
+
+def ok(response: httpx.Response) -> httpx.Response | None:
+    return response if response.status_code == 200 else None
+
+
+def test_topics_name_rigs_by_their_path_under_the_prefix() -> None:
+    assert split_topic("plant", "plant/edge1/line3/status") == ("edge1/line3", "status")
+    assert split_topic("plant", "plant/line3/ack/result") == ("line3", "ack/result")
+    assert split_topic("plant", "plant/a/snapshot/overlay.jpg") == ("a", "snapshot/overlay.jpg")
+    assert split_topic("plant", "plant/a/ack") is None  # our own command, not an answer
+    assert split_topic("plant", "other/a/status") is None
+    assert split_topic("plant", "plant/status") is None
+    assert monitor_of("edge1/line3") == "edge1/monitor" and monitor_of("line3") == "monitor"
+
+
+def test_what_arrives_becomes_rigs_alarms_events_and_pictures(tmp_path: Path) -> None:
+    central = CentralDashboard("mqtt://127.0.0.1:1/plant", tmp_path, MqttSettings(), print)
+    say = lambda topic, body: central._message(  # noqa: E731
+        f"plant/{topic}", body if isinstance(body, bytes) else json.dumps(body).encode()
+    )
+    say("edge1/monitor/status", {"state": "running", "rigs": ["a"]})
+    status = {"name": "a", "health": "ok", "state": "running", "active_alarms": [],
+              "hottest": None, "rois": {}, "fps": 8.7}  # fmt: skip
+    say("edge1/a/status", status)
+    say("edge1/a/measurements", {
+        "frame": 7, "time_s": 1.0e9, "vox_temp_c": 31.0,
+        "hottest": {"max_c": 67.5, "position_m": [0, 0, 1], "distance_m": 1.0, "resolvable": True},
+        "rois": {"plate": {"max_c": 67.5, "mean_c": 40.0, "min_c": 25.0, "n": 100}},
+    })  # fmt: skip
+    raised = {"id": 41, "rig": "a", "rule": "hot", "level": "alarm", "event": "alarm",
+              "time_utc": "2026-11-26T18:00:00+00:00", "value_c": 67.5, "clip": "c1"}  # fmt: skip
+    say("edge1/a/alarms", raised)
+    say("edge1/a/alarms", raised)  # delivered again (at least once): kept once
+    say("edge1/a/alarms", b"{not json")  # one line, nothing kept
+    (rig,) = central.status()["rigs"]
+    assert rig["name"] == "edge1/a" and rig["monitor"] == "edge1/monitor"
+    assert rig["hottest"]["max_c"] == 67.5 and rig["rois"]["plate"]["mean_c"] == 40.0
+    assert rig["active_alarms"] == [{"rule": "hot", "level": "alarm"}]
+    (event,) = central.events()
+    assert event["rig"] == "edge1/a" and event["origin"] == "edge1/a#41"
+    assert central.evidence_of(event) == []  # no overlay had come yet ...
+    say("edge1/a/snapshot/overlay.jpg", jpeg(640, 360, 200))
+    assert central.evidence_of(event) == ["snapshot.png"]  # ... the first one is its snapshot
+    png = cv2.imread(str(central.evidence_file(event["id"], "snapshot.png")))
+    assert png.shape == (360, 640, 3) and abs(int(png.mean()) - 200) <= 2
+    assert central.evidence_file(event["id"], "clip.zip") is None  # on the monitor's disk
+    small = cv2.imdecode(np.frombuffer(central.picture("edge1/a", "overlay", 320), np.uint8), 1)
+    assert small.shape == (180, 320, 3)
+    assert central.picture("edge1/a", "thermal") is None and central.picture("z", "overlay") is None
+    assert central.trend("edge1/a") == [
+        {"time_s": 1.0e9, "hottest_c": 67.5, "rois": {"plate": 67.5}}
+    ]
+    say("edge1/a/alarms", {**raised, "id": 42, "event": "acknowledged", "by": "jane",
+                           "at_utc": "2026-11-26T18:00:05+00:00"})  # fmt: skip
+    assert central.status()["rigs"][0]["active_alarms"][0]["acknowledged"]["by"] == "jane"
+    say("edge1/a/alarms", {**raised, "id": 43, "event": "clear"})
+    assert central.status()["rigs"][0]["active_alarms"] == []
+    assert [e["event"] for e in central.events()] == ["clear", "acknowledged", "alarm"]
+    assert central.stale_rigs() == ["edge1/a"]  # the broker is not there
+    with pytest.raises(AckRefusedError) as info:
+        central.acknowledge("edge9/z", "hot", "jane")
+    assert info.value.status == 404
+    central.store.close()
+
+
+def test_the_dashboards_options_are_checked(tmp_path: Path) -> None:
+    http = HttpConfig(listen="0.0.0.0:8090", tls_cert=tmp_path / "c.pem")
+    with pytest.raises(InputError) as info:
+        run_dashboard("mqtt://127.0.0.1/plant", tmp_path, http, MqttSettings(), print)
+    assert str(info.value).splitlines() == [
+        "--listen: 0.0.0.0:8090 is reachable from other machines: give --token-file (or "
+        "THERMODEPTH_HTTP_TOKEN), or listen on 127.0.0.1",
+        "--tls-cert and --tls-key go together",
+        f"--tls-cert: {tmp_path / 'c.pem'}: no such file",
+    ]
+
+
+LATCHED = """\
+hotspots:
+  threshold_c: 50
+alarms:
+  - {name: latched, above_c: 60, for_s: 1, latch: true}
+"""
+
+
+@pytest.mark.skipif(mqtt_broker.missing() is not None, reason=mqtt_broker.missing() or "")
+def test_two_monitors_and_one_central_dashboard_on_one_broker(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    broker = mqtt_broker.Broker()
+    broker.start()
+    monkeypatch.setenv(PASSWORD_ENV, broker.password)
+    monitors: list[Monitor] = []
+    central = server = None
+    try:
+        for edge, rig in (("edge1", "a"), ("edge2", "b")):
+            folder = tmp_path / edge
+            folder.mkdir()
+            settings_file(folder, LATCHED)
+            path = monitor_config(
+                folder,
+                [{"name": rig, "source": "sim:pace=real", "settings": "s.yaml"}],
+                http={"listen": None},
+                mqtt={"url": broker.url(f"plant/{edge}"), "connect_timeout_s": 2,
+                      "snapshots_hz": 2, "client_id": f"monitor-{edge}"},
+            )  # fmt: skip
+            monitors.append(Monitor(load_config(path), lambda line: None))
+            monitors[-1].start()
+        (tmp_path / "token").write_text("s3cret\n")
+        central = CentralDashboard(broker.url("plant"), tmp_path / "central", MqttSettings(), print)
+        central.start()
+        server = HttpServer(
+            central, HttpConfig(listen="127.0.0.1:0", token_file=tmp_path / "token")
+        )
+        server.start()
+        with httpx.Client(base_url=server.url, timeout=10,
+                          headers={"Authorization": "Bearer s3cret"}) as c:  # fmt: skip
+
+            def rigs() -> dict[str, Any]:
+                found = {r["name"]: r for r in c.get("/api/status").json()["rigs"]}
+                return (
+                    found if len(found) == 2 and all(r["hottest"] for r in found.values()) else {}
+                )
+
+            found = wait_for(rigs, 20)
+            assert sorted(found) == ["edge1/a", "edge2/b"]
+            assert all(r["health"] == "ok" and 60 < r["hottest"]["max_c"] < 75
+                       for r in found.values())  # fmt: skip
+            overlay = wait_for(lambda: ok(c.get("/api/rigs/edge1/a/overlay.jpg?width=320")), 10)
+            assert overlay.headers["content-type"] == "image/jpeg"
+            img = cv2.imdecode(np.frombuffer(overlay.content, np.uint8), 1)
+            assert img.shape[1] == 320
+            assert c.get("/api/rigs/edge2%2Fb/thermal.png").content.startswith(b"\x89PNG")
+            assert c.get("/rig/edge2%2Fb").status_code == 200  # the rig's page, by its path
+
+            # the alarm raised on edge1, acknowledged through the central dashboard
+            def raised() -> list[dict[str, Any]]:
+                return [e for e in c.get("/api/events?rig=edge1/a").json()
+                        if e["rule"] == "latched" and e["event"] == "alarm"]  # fmt: skip
+
+            event = wait_for(raised, 15)[0]
+            wait_for(lambda: c.get(f"/api/events/{event['id']}").json()["evidence"], 5)
+            assert c.get(f"/api/events/{event['id']}/snapshot.png").content.startswith(b"\x89PNG")
+            assert c.get(f"/api/events/{event['id']}/clip.zip").status_code == 404
+            ack = c.post("/api/ack", json={"rig": "edge1/a", "rule": "latched", "by": "jane"})
+            assert ack.status_code == 200 and ack.json()[0]["event"] == "acknowledged"
+            on_edge = [e for e in monitors[0].store.events(50) if e["event"] == "acknowledged"]
+            assert [(e["rig"], e["by"]) for e in on_edge] == [("a", "jane")]
+            wait_for(lambda: c.get("/api/events?state=acknowledged").json(), 5)
+            refused = c.post("/api/ack", json={"rig": "edge2/b", "rule": "melt", "by": "jane"})
+            assert refused.status_code == 409 and "melt" in refused.json()["error"]
+            assert (
+                c.post("/api/ack", json={"rig": "b", "rule": "latched", "by": "j"}).status_code
+                == 404
+            )
+
+            monitors.pop().stop()  # edge2's
+            stale = wait_for(lambda: c.get("/api/status").json()["monitors"]["edge2/monitor"]
+                             == "stopped" and c.get("/healthz"), 10)  # fmt: skip
+            assert stale.status_code == 503 and stale.json()["rigs"] == ["edge2/b"]
+    finally:
+        for m in monitors:
+            m.stop()
+        if server is not None:
+            server.stop()
+        if central is not None:
+            central.stop()
+        broker.cleanup()
