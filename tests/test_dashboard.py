@@ -141,6 +141,8 @@ def test_live_pictures_trend_and_the_schema(running: Any) -> None:
             overlay.content.startswith(b"\xff\xd8")
             and overlay.headers["cache-control"] == "no-store"
         )
+        shown_s = float(overlay.headers["x-capture-time"])  # its frame's, as the trend's
+        assert shown_s >= 0 and monitor.runners["a"].status.frames > 0
         small = c.get("/api/rigs/a/overlay.jpg", params={"width": 320})
         import cv2
         import numpy as np

@@ -83,7 +83,9 @@ def test_what_arrives_becomes_rigs_alarms_events_and_pictures(tmp_path: Path) ->
     png = cv2.imread(str(central.evidence_file(event["id"], "snapshot.png")))
     assert png.shape == (360, 640, 3) and abs(int(png.mean()) - 200) <= 2
     assert central.evidence_file(event["id"], "clip.zip") is None  # on the monitor's disk
-    small = cv2.imdecode(np.frombuffer(central.picture("edge1/a", "overlay", 320), np.uint8), 1)
+    small = cv2.imdecode(
+        np.frombuffer(central.picture("edge1/a", "overlay", 320).data, np.uint8), 1
+    )
     assert small.shape == (180, 320, 3)
     assert central.picture("edge1/a", "thermal") is None and central.picture("z", "overlay") is None
     assert central.trend("edge1/a") == [
@@ -169,7 +171,8 @@ def test_two_monitors_and_one_central_dashboard_on_one_broker(
             assert overlay.headers["content-type"] == "image/jpeg"
             img = cv2.imdecode(np.frombuffer(overlay.content, np.uint8), 1)
             assert img.shape[1] == 320
-            assert c.get("/api/rigs/edge2%2Fb/thermal.png").content.startswith(b"\x89PNG")
+            thermal = wait_for(lambda: ok(c.get("/api/rigs/edge2%2Fb/thermal.png")), 10)
+            assert thermal.content.startswith(b"\x89PNG")
             assert c.get("/rig/edge2%2Fb").status_code == 200  # the rig's page, by its path
 
             # the alarm raised on edge1, acknowledged through the central dashboard

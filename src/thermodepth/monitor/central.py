@@ -47,7 +47,7 @@ from .. import __version__
 from ..pipeline import MqttSettings
 from ..sinks.mqtt import MqttConnection, MqttTarget, default_client_id
 from .config import MONITOR
-from .live import Trend, encode
+from .live import Picture, Trend, encode
 from .publish import SNAPSHOTS, STATUS_EVERY_S
 from .store import EventStore
 from .supervisor import AckRefusedError
@@ -353,19 +353,19 @@ class CentralDashboard:
         path = self._snapshot_path(event_id)
         return path if what == "snapshot.png" and path.exists() else None
 
-    def picture(self, rig: str, what: str, width: int | None = None) -> bytes | None:
+    def picture(self, rig: str, what: str, width: int | None = None) -> Picture | None:
         """A rig's latest published ``overlay`` (JPEG) or ``thermal`` (PNG) picture, made
-        smaller when ``width`` asks."""
+        smaller when ``width`` asks (its frame's time is not published: None)."""
         leaf = next(k for k, (w, _) in SNAPSHOTS.items() if w == what)
         with self._lock:
             r = self.rigs.get(rig)
             data = None if r is None else r.pictures.get(leaf)
-        if data is None or width is None:
-            return data
-        img = _decoded(data)
-        if img is None or width >= img.shape[1]:
-            return data
-        return encode(img, "jpeg" if leaf.endswith(".jpg") else "png", width)
+        if data is None:
+            return None
+        img = None if width is None else _decoded(data)
+        if img is not None and width is not None and width < img.shape[1]:
+            data = encode(img, "jpeg" if leaf.endswith(".jpg") else "png", width)
+        return Picture(data, None)
 
     def trend(self, rig: str) -> list[dict[str, Any]] | None:
         with self._lock:

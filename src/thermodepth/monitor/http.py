@@ -57,6 +57,8 @@ if TYPE_CHECKING:
     from starlette.requests import Request
     from starlette.responses import Response
 
+    from .live import Picture
+
 INSTALL = "the monitor's HTTP server needs the monitor extra: pip install 'thermodepth[monitor]'"
 WEB = files("thermodepth.monitor") / "web"
 PAGES = {"/": "index.html", "/events": "events.html", "/health": "health.html"}
@@ -87,7 +89,7 @@ class Monitor(Protocol):
 
     def evidence_of(self, event: dict[str, Any]) -> list[str]: ...
 
-    def picture(self, rig: str, what: str, width: int | None) -> bytes | None: ...
+    def picture(self, rig: str, what: str, width: int | None) -> Picture | None: ...
 
     def trend(self, rig: str) -> list[dict[str, Any]] | None: ...
 
@@ -276,7 +278,7 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
           - {name: width, in: query, schema: {type: integer}}
         responses:
           200: {description: "the rig's latest overlay (overlay.jpg) or thermal image
-            (thermal.png)"}
+            (thermal.png); X-Capture-Time: its frame's capture time (Unix s), when known"}
           404: {description: no such rig, or no frame yet}
         """
         you = who(request)
@@ -290,10 +292,13 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         except ValueError:
             return _error("width: a whole number of pixels", 400)
         kind, media = PICTURES[what]
-        data = monitor.picture(request.path_params["rig"], kind, width)
-        if data is None:
+        found = monitor.picture(request.path_params["rig"], kind, width)
+        if found is None:
             return _error("no such rig, or no frame yet", 404)
-        return Response(data, media_type=media, headers={"Cache-Control": "no-store"})
+        headers = {"Cache-Control": "no-store"}
+        if found.time_s is not None:
+            headers["X-Capture-Time"] = f"{found.time_s:.3f}"
+        return Response(found.data, media_type=media, headers=headers)
 
     async def trend(request: Request) -> Response:
         """

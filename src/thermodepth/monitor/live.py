@@ -103,6 +103,15 @@ def encode(img: NDArray[np.uint8], kind: str, width: int | None = None) -> bytes
     return bytes(data)
 
 
+@dataclass(frozen=True)
+class Picture:
+    """A live picture's bytes (JPEG or PNG) and the capture time of its frame (the thermal
+    frame's, s: Unix time for a live rig; None: not known)."""
+
+    data: bytes
+    time_s: float | None
+
+
 @dataclass
 class Trend:
     """A rig's readings, one every :data:`TREND_EVERY_S` over the last :data:`TREND_S`: each
@@ -132,7 +141,7 @@ class LiveView:
     wanted_until: float = 0.0
     last_s: float = 0.0
     trend: Trend = field(default_factory=Trend)
-    _cache: dict[tuple[int, str, int | None], bytes] = field(default_factory=dict)
+    _cache: dict[tuple[int, str, int | None], Picture] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     def fused(self, fused: FusedFrame) -> None:
@@ -157,7 +166,7 @@ class LiveView:
         """Someone looks: keep the pictures coming for WATCH_S."""
         self.wanted_until = time.monotonic() + WATCH_S
 
-    def picture(self, what: str, width: int | None = None) -> bytes | None:
+    def picture(self, what: str, width: int | None = None) -> Picture | None:
         """The latest ``overlay`` (JPEG) or ``thermal`` (PNG) picture, None before the first
         frame someone looked at."""
         self.wanted()
@@ -172,7 +181,8 @@ class LiveView:
             data = encode(overlay_image(frame, range_c, self.rois), "jpeg", width)
         else:
             data = encode(thermal_image(frame, range_c), "png", width)
+        picture = Picture(data, frame.thermal_time_s)
         with self._lock:
             if self.frame is frame:
-                self._cache[key] = data
-        return data
+                self._cache[key] = picture
+        return picture

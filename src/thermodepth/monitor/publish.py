@@ -36,6 +36,7 @@ from ..pipeline import FusedFrame
 from ..sinks.mqtt import MqttConnection, MqttTarget, default_client_id, measurement_message
 from .config import MONITOR, MqttConfig
 from .homeassistant import Discovery, RigEntities
+from .live import Picture
 from .store import EventStore
 from .supervisor import AckRefusedError
 
@@ -44,7 +45,7 @@ SNAPSHOT_WIDTH = 640
 SNAPSHOTS = {"overlay.jpg": ("overlay", SNAPSHOT_WIDTH), "thermal.png": ("thermal", None)}
 """A snapshot topic's leaf: the picture (:meth:`~.live.LiveView.picture`) and its width."""
 Acknowledge = Callable[[str, str, str], list[dict[str, Any]]]
-Picture = Callable[[str, str, int | None], bytes | None]
+Pictures = Callable[[str, str, int | None], Picture | None]
 
 
 class MonitorPublisher:
@@ -61,7 +62,7 @@ class MonitorPublisher:
         entities: list[RigEntities],
         acknowledge: Acknowledge,
         published: Callable[[dict[str, Any]], None],
-        picture: Picture,
+        picture: Pictures,
         log: Callable[[str], None],
     ) -> None:
         self.config, self.store, self.entities = config, store, entities
@@ -151,9 +152,10 @@ class MonitorPublisher:
                 continue  # QoS 0: a picture not sent now is worth nothing later
             for rig in self.rigs:
                 for leaf, (what, width) in SNAPSHOTS.items():
-                    data = self.picture(rig, what, width)
-                    if data is not None:
-                        self.connection.publish(self.topic(rig, f"snapshot/{leaf}"), data, 0, True)
+                    found = self.picture(rig, what, width)
+                    if found is not None:
+                        topic = self.topic(rig, f"snapshot/{leaf}")
+                        self.connection.publish(topic, found.data, 0, True)
 
     def publish_direct(self, event: dict[str, Any]) -> None:
         """An event the store could not keep: sent from memory."""

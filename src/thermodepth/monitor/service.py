@@ -33,6 +33,7 @@ from .config import MONITOR, MonitorConfig, RigConfig
 from .evidence import Evidence
 from .failsafe import SENSOR_FAULT, STORAGE_FAULT, Fault
 from .homeassistant import RigEntities
+from .live import Picture
 from .opcua import OpcUaServer
 from .publish import MonitorPublisher
 from .rig import RigSink, quantiles
@@ -590,7 +591,7 @@ class Monitor:
         kept, nothing otherwise."""
         return list(EVIDENCE_FILES) if event.get("clip") and event.get("clip_kept", True) else []
 
-    def picture(self, rig: str, what: str, width: int | None = None) -> bytes | None:
+    def picture(self, rig: str, what: str, width: int | None = None) -> Picture | None:
         """A rig's latest ``overlay`` (JPEG) or ``thermal`` (PNG) picture (:mod:`.live`)."""
         runner = self.runners.get(rig)
         return None if runner is None else runner.live.picture(what, width)

@@ -6,7 +6,11 @@ let session = { auth: "open", name: null, csrf: null };
 const esc = (s) => String(s ?? "").replace(/[&<>"']/g, (c) =>
   ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]);
 const num = (v, d = 1) => (v === null || v === undefined || Number.isNaN(v) ? "–" : Number(v).toFixed(d));
-const when = (e) => new Date(e.time_utc).toLocaleString();
+// local time, 24 h, as a control room reads it: 2026-11-26 18:07:29
+const when = (e) => {
+  const d = new Date(e.time_utc), p = (n) => String(n).padStart(2, "0");
+  return `${d.getFullYear()}-${p(d.getMonth() + 1)}-${p(d.getDate())} ${p(d.getHours())}:${p(d.getMinutes())}:${p(d.getSeconds())}`;
+};
 
 async function api(path, options = {}) {
   const r = await fetch(path, { credentials: "same-origin", ...options });
