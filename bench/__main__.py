@@ -17,6 +17,7 @@ BENCHMARKS = [
     "bench_batch",
     "bench_detection",
     "bench_monitor",
+    "bench_dashboard",
 ]
 
 

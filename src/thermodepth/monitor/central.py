@@ -111,6 +111,7 @@ class CentralDashboard:
         self.folder = folder
         (folder / "snapshots").mkdir(parents=True, exist_ok=True)
         self.store = EventStore(folder / "events.sqlite")
+        self.events, self.event = self.store.events, self.store.event  # as /api/events asks
         self.started_s = time.monotonic()
         self.started_utc = datetime.now(timezone.utc).isoformat(timespec="seconds")
         self.rigs: dict[str, RemoteRig] = {}
@@ -330,20 +331,6 @@ class CentralDashboard:
             },
             "latency_s": {},
         }
-
-    def events(
-        self,
-        limit: int = 100,
-        rig: str | None = None,
-        before_id: int | None = None,
-        level: str | None = None,
-        state: str | None = None,
-    ) -> list[dict[str, Any]]:
-        """The newest events kept (``/api/events``)."""
-        return self.store.events(limit, rig, before_id, level, state)
-
-    def event(self, event_id: int) -> dict[str, Any] | None:
-        return self.store.event(event_id)
 
     def evidence_of(self, event: dict[str, Any]) -> list[str]:
         """The snapshot, when one was kept: the clip and cloud stay on the monitor's disk."""

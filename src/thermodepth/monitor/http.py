@@ -61,7 +61,9 @@ if TYPE_CHECKING:
 
 INSTALL = "the monitor's HTTP server needs the monitor extra: pip install 'thermodepth[monitor]'"
 WEB = files("thermodepth.monitor") / "web"
-PAGES = {"/": "index.html", "/events": "events.html", "/health": "health.html"}
+PAGES = {"/": ("overview", "Overview"), "/events": ("events", "Events"),
+         "/health": ("health", "Health"), "/rig/{rig:path}": ("rig", "Rig")}  # fmt: skip
+"""Each page's path, name (what app.js draws) and title: one template, web/page.html."""
 EVIDENCE = {"snapshot.png": "image/png", "cloud.ply": "application/octet-stream",
             "clip.zip": "application/zip"}  # fmt: skip
 PICTURES = {"overlay.jpg": ("overlay", "image/jpeg"), "thermal.png": ("thermal", "image/png")}
@@ -142,11 +144,15 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         found = auth.identity(request.headers, request.cookies)
         return found if found is not None else _error("a token is needed", 401)
 
-    def page(name: str) -> Any:
+    template = (WEB / "page.html").read_text(encoding="utf-8")
+
+    def page(name: str, title: str) -> Any:
+        html = template.replace("{{page}}", name).replace("{{title}}", title)
+
         async def serve(request: Request) -> Response:
             if auth.identity(request.headers, request.cookies) is None:
                 return RedirectResponse(f"/login?next={request.url.path}", 303)
-            return HTMLResponse((WEB / name).read_text(encoding="utf-8"))
+            return HTMLResponse(html)
 
         return serve
 
@@ -363,8 +369,7 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         return _json(schemas.get_schema(routes=request.app.routes))
 
     routes = [
-        *(Route(path, page(name)) for path, name in PAGES.items()),
-        Route("/rig/{rig:path}", page("rig.html")),
+        *(Route(path, page(name, title)) for path, (name, title) in PAGES.items()),
         Route("/login", login_page),
         Route("/login", login, methods=["POST"]),
         Route("/logout", logout, methods=["POST"]),
