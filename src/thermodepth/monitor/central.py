@@ -27,7 +27,6 @@ from __future__ import annotations
 import json
 import os
 import queue
-import shutil
 import sqlite3
 import tempfile
 import threading
@@ -49,7 +48,8 @@ from ..sinks.mqtt import MqttConnection, MqttTarget, default_client_id
 from .config import MONITOR
 from .live import Picture, Trend, encode
 from .publish import SNAPSHOTS, STATUS_EVERY_S
-from .store import EventStore
+from .storage import free_bytes
+from .store import EventStore, counts_by_rig
 from .supervisor import AckRefusedError
 
 SILENT_S = 2.5 * STATUS_EVERY_S
@@ -299,10 +299,6 @@ class CentralDashboard:
                 rigs.append(d)
             monitors = dict(sorted(self.monitors.items()))
             counts = dict(self.event_counts)
-        try:
-            free = shutil.disk_usage(self.folder).free
-        except OSError:
-            free = 0
         return {
             "version": __version__,
             "started_utc": self.started_utc,
@@ -312,7 +308,7 @@ class CentralDashboard:
             "monitors": monitors,
             "storage": {
                 "path": str(self.folder),
-                "free_bytes": free,
+                "free_bytes": free_bytes(self.folder),
                 "event_store_bytes": self.store.size_bytes(),
                 "events_not_stored": 0,
                 "pictures_skipped": 0,
@@ -325,10 +321,7 @@ class CentralDashboard:
                 "sent": self.acks_sent,
                 "unacknowledged": self.connection.pending,
             },
-            "event_counts": {
-                rig: {state: n for (r, state), n in counts.items() if r == rig}
-                for rig in sorted({r for r, _ in counts})
-            },
+            "event_counts": counts_by_rig(counts),
             "latency_s": {},
         }
 

@@ -37,8 +37,8 @@ from .live import Picture
 from .opcua import OpcUaServer
 from .publish import MonitorPublisher
 from .rig import RigSink, quantiles
-from .storage import CLIPS, Retention
-from .store import EventStore
+from .storage import CLIPS, Retention, free_bytes
+from .store import EventStore, counts_by_rig
 from .supervisor import AckRefusedError, RigRunner
 from .systemd import notify, watchdog_interval_s
 
@@ -513,12 +513,6 @@ class Monitor:
             d["temp_range_c"] = r.live.range_c
             rigs.append(d)
         path = self.config.storage.path
-        try:
-            import shutil
-
-            free = shutil.disk_usage(path).free
-        except OSError:
-            free = 0
         return {
             "version": __version__,
             "started_utc": self.started_utc,
@@ -526,7 +520,7 @@ class Monitor:
             "rigs": rigs,
             "storage": {
                 "path": str(path),
-                "free_bytes": free,
+                "free_bytes": free_bytes(path),
                 "event_store_bytes": self.store.size_bytes(),
                 "events_not_stored": len(self.backlog),
                 "pictures_skipped": self.evidence.pictures_skipped,
@@ -541,10 +535,7 @@ class Monitor:
                 "sent": self.publisher.sent,
                 "unacknowledged": self.publisher.connection.pending,
             },
-            "event_counts": {
-                rig: {state: n for (r, state), n in self.event_counts.items() if r == rig}
-                for rig in sorted({r for r, _ in self.event_counts})
-            },
+            "event_counts": counts_by_rig(self.event_counts),
             "latency_s": {k: quantiles(v) for k, v in self.latency_s.items()},
         }
 

@@ -200,3 +200,11 @@ class Retention:
             kind, path = queue.pop(0)  # continuous segments first, then clips
             self._delete(kind, path)
         return None
+
+
+def free_bytes(path: Path) -> int:
+    """Free space on the file system of ``path`` (0: it cannot be asked)."""
+    try:
+        return shutil.disk_usage(path).free
+    except OSError:
+        return 0

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -198,3 +198,11 @@ class EventStore:
     def close(self) -> None:
         with self._lock:
             self.db.close()
+
+
+def counts_by_rig(counts: Mapping[tuple[str, str], int]) -> dict[str, dict[str, int]]:
+    """Events counted by (rig, kind) as ``{rig: {kind: n}}``, rigs in order (``/api/status``)."""
+    out: dict[str, dict[str, int]] = {}
+    for (rig, kind), n in sorted(counts.items()):
+        out.setdefault(rig, {})[kind] = n
+    return out
