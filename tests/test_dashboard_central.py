@@ -19,6 +19,7 @@ pytest.importorskip("paho.mqtt.client", reason="the dashboard's MQTT needs the m
 
 import httpx
 
+import browser
 import mqtt_broker
 from monitor_helpers import monitor_config, settings_file, wait_for
 from thermodepth.app.monitor import run_dashboard
@@ -124,14 +125,21 @@ alarms:
 """
 
 
-@pytest.mark.skipif(mqtt_broker.missing() is not None, reason=mqtt_broker.missing() or "")
-def test_two_monitors_and_one_central_dashboard_on_one_broker(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+needs_broker = pytest.mark.skipif(
+    mqtt_broker.missing() is not None, reason=mqtt_broker.missing() or ""
+)
+
+
+@pytest.fixture(scope="module")
+def plant(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """A broker; two monitors of one paced simulated rig each, publishing under plant/edge1
+    and plant/edge2; a central dashboard of plant/ with a token, served on loopback."""
+    tmp_path = tmp_path_factory.mktemp("plant")
     broker = mqtt_broker.Broker()
     broker.start()
-    monkeypatch.setenv(PASSWORD_ENV, broker.password)
-    monitors: list[Monitor] = []
+    mp = pytest.MonkeyPatch()
+    mp.setenv(PASSWORD_ENV, broker.password)
+    monitors: dict[str, Monitor] = {}
     central = server = None
     try:
         for edge, rig in (("edge1", "a"), ("edge2", "b")):
@@ -145,8 +153,8 @@ def test_two_monitors_and_one_central_dashboard_on_one_broker(
                 mqtt={"url": broker.url(f"plant/{edge}"), "connect_timeout_s": 2,
                       "snapshots_hz": 2, "client_id": f"monitor-{edge}"},
             )  # fmt: skip
-            monitors.append(Monitor(load_config(path), lambda line: None))
-            monitors[-1].start()
+            monitors[edge] = Monitor(load_config(path), lambda line: None)
+            monitors[edge].start()
         (tmp_path / "token").write_text("s3cret\n")
         central = CentralDashboard(broker.url("plant"), tmp_path / "central", MqttSettings(), print)
         central.start()
@@ -154,57 +162,99 @@ def test_two_monitors_and_one_central_dashboard_on_one_broker(
             central, HttpConfig(listen="127.0.0.1:0", token_file=tmp_path / "token")
         )
         server.start()
-        with httpx.Client(base_url=server.url, timeout=10,
-                          headers={"Authorization": "Bearer s3cret"}) as c:  # fmt: skip
-
-            def rigs() -> dict[str, Any]:
-                found = {r["name"]: r for r in c.get("/api/status").json()["rigs"]}
-                return (
-                    found if len(found) == 2 and all(r["hottest"] for r in found.values()) else {}
-                )
-
-            found = wait_for(rigs, 20)
-            assert sorted(found) == ["edge1/a", "edge2/b"]
-            assert all(r["health"] == "ok" and 60 < r["hottest"]["max_c"] < 75
-                       for r in found.values())  # fmt: skip
-            overlay = wait_for(lambda: ok(c.get("/api/rigs/edge1/a/overlay.jpg?width=320")), 10)
-            assert overlay.headers["content-type"] == "image/jpeg"
-            img = cv2.imdecode(np.frombuffer(overlay.content, np.uint8), 1)
-            assert img.shape[1] == 320
-            thermal = wait_for(lambda: ok(c.get("/api/rigs/edge2%2Fb/thermal.png")), 10)
-            assert thermal.content.startswith(b"\x89PNG")
-            assert c.get("/rig/edge2%2Fb").status_code == 200  # the rig's page, by its path
-
-            # the alarm raised on edge1, acknowledged through the central dashboard
-            def raised() -> list[dict[str, Any]]:
-                return [e for e in c.get("/api/events?rig=edge1/a").json()
-                        if e["rule"] == "latched" and e["event"] == "alarm"]  # fmt: skip
-
-            event = wait_for(raised, 15)[0]
-            wait_for(lambda: c.get(f"/api/events/{event['id']}").json()["evidence"], 5)
-            assert c.get(f"/api/events/{event['id']}/snapshot.png").content.startswith(b"\x89PNG")
-            assert c.get(f"/api/events/{event['id']}/clip.zip").status_code == 404
-            ack = c.post("/api/ack", json={"rig": "edge1/a", "rule": "latched", "by": "jane"})
-            assert ack.status_code == 200 and ack.json()[0]["event"] == "acknowledged"
-            on_edge = [e for e in monitors[0].store.events(50) if e["event"] == "acknowledged"]
-            assert [(e["rig"], e["by"]) for e in on_edge] == [("a", "jane")]
-            wait_for(lambda: c.get("/api/events?state=acknowledged").json(), 5)
-            refused = c.post("/api/ack", json={"rig": "edge2/b", "rule": "melt", "by": "jane"})
-            assert refused.status_code == 409 and "melt" in refused.json()["error"]
-            assert (
-                c.post("/api/ack", json={"rig": "b", "rule": "latched", "by": "j"}).status_code
-                == 404
-            )
-
-            monitors.pop().stop()  # edge2's
-            stale = wait_for(lambda: c.get("/api/status").json()["monitors"]["edge2/monitor"]
-                             == "stopped" and c.get("/healthz"), 10)  # fmt: skip
-            assert stale.status_code == 503 and stale.json()["rigs"] == ["edge2/b"]
+        yield monitors, server
     finally:
-        for m in monitors:
+        for m in monitors.values():
             m.stop()
         if server is not None:
             server.stop()
         if central is not None:
             central.stop()
+        mp.undo()
         broker.cleanup()
+
+
+def bearer(server: HttpServer) -> httpx.Client:
+    return httpx.Client(base_url=server.url, timeout=10, headers={"Authorization": "Bearer s3cret"})
+
+
+@needs_broker
+def test_two_monitors_and_one_central_dashboard_on_one_broker(plant: Any) -> None:
+    monitors, server = plant
+    with bearer(server) as c:
+
+        def rigs() -> dict[str, Any]:
+            found = {r["name"]: r for r in c.get("/api/status").json()["rigs"]}
+            return found if len(found) == 2 and all(r["hottest"] for r in found.values()) else {}
+
+        found = wait_for(rigs, 20)
+        assert sorted(found) == ["edge1/a", "edge2/b"]
+        assert all(r["health"] == "ok" and 60 < r["hottest"]["max_c"] < 75
+                   for r in found.values())  # fmt: skip
+        overlay = wait_for(lambda: ok(c.get("/api/rigs/edge1/a/overlay.jpg?width=320")), 10)
+        assert overlay.headers["content-type"] == "image/jpeg"
+        img = cv2.imdecode(np.frombuffer(overlay.content, np.uint8), 1)
+        assert img.shape[1] == 320
+        thermal = wait_for(lambda: ok(c.get("/api/rigs/edge2%2Fb/thermal.png")), 10)
+        assert thermal.content.startswith(b"\x89PNG")
+        assert c.get("/rig/edge2%2Fb").status_code == 200  # the rig's page, by its path
+
+        # the alarm raised on edge1, acknowledged through the central dashboard
+        def raised() -> list[dict[str, Any]]:
+            return [e for e in c.get("/api/events?rig=edge1/a").json()
+                    if e["rule"] == "latched" and e["event"] == "alarm"]  # fmt: skip
+
+        event = wait_for(raised, 15)[0]
+        wait_for(lambda: c.get(f"/api/events/{event['id']}").json()["evidence"], 5)
+        assert c.get(f"/api/events/{event['id']}/snapshot.png").content.startswith(b"\x89PNG")
+        assert c.get(f"/api/events/{event['id']}/clip.zip").status_code == 404
+        ack = c.post("/api/ack", json={"rig": "edge1/a", "rule": "latched", "by": "jane"})
+        assert ack.status_code == 200 and ack.json()[0]["event"] == "acknowledged"
+        edge1 = monitors["edge1"].store.events(50)
+        assert [(e["rig"], e["by"]) for e in edge1 if e["event"] == "acknowledged"] == [
+            ("a", "jane")
+        ]
+        wait_for(lambda: c.get("/api/events?state=acknowledged").json(), 5)
+        refused = c.post("/api/ack", json={"rig": "edge2/b", "rule": "melt", "by": "jane"})
+        assert refused.status_code == 409 and "melt" in refused.json()["error"]
+        unknown = c.post("/api/ack", json={"rig": "b", "rule": "latched", "by": "j"})
+        assert unknown.status_code == 404
+
+
+@needs_broker
+@pytest.mark.skipif(browser.missing() is not None, reason=browser.missing() or "")
+def test_the_central_dashboards_pages_in_a_browser(plant: Any) -> None:
+    from selenium.webdriver.common.by import By
+
+    _, server = plant
+    driver = browser.chromium()
+    try:
+        driver.get(f"{server.url}/login")
+        driver.find_element(By.ID, "name").send_keys("operator jane")
+        driver.find_element(By.ID, "token").send_keys("s3cret")
+        driver.find_element(By.CSS_SELECTOR, "button[type=submit]").click()
+        script = "return [...document.querySelectorAll('section.card')].map((c) => c.dataset.rig)"
+        assert wait_for(lambda: driver.execute_script(script) == ["edge1/a", "edge2/b"], 10)
+        loaded = (
+            "const i = document.querySelector('section.card[data-rig=\"edge2/b\"] img');"
+            "return i && i.complete ? i.naturalWidth : 0"
+        )
+        assert wait_for(lambda: driver.execute_script(loaded), 10) == 640
+        driver.find_element(By.LINK_TEXT, "edge2/b").click()  # the rig's page, by its path
+        wait_for(
+            lambda: driver.execute_script("return document.title") == "thermodepth · edge2/b", 5
+        )
+    finally:
+        driver.quit()
+
+
+@needs_broker
+def test_a_stopped_monitors_rig_goes_stale(plant: Any) -> None:
+    monitors, server = plant
+    with bearer(server) as c:
+        wait_for(lambda: len(c.get("/api/status").json()["rigs"]) == 2, 20)
+        monitors.pop("edge2").stop()
+        stale = wait_for(lambda: c.get("/api/status").json()["monitors"]["edge2/monitor"]
+                         == "stopped" and c.get("/healthz"), 10)  # fmt: skip
+        assert stale.status_code == 503 and stale.json()["rigs"] == ["edge2/b"]
+        assert c.get("/api/status").json()["rigs"][1]["health"] == "stale"
