@@ -167,12 +167,16 @@ def thermal_image(
     if image.dtype == np.uint16:
         return image.astype(np.uint16, copy=False), False
     if image.dtype.kind == "f":
-        kelvin = np.where(np.isfinite(image), image, 0.0)
-        values = np.clip(np.rint(kelvin / FLOAT_KELVIN.scale_k), 0, 65535).astype(np.uint16)
-        return values, True
+        return kelvin_values(image), True
     raise RowError(
         f"{where}: {path}: thermal must be uint16 values or float kelvin, got {image.dtype}"
     )
+
+
+def kelvin_values(kelvin: NDArray[Any]) -> NDArray[np.uint16]:
+    """Float kelvin as held: uint16 at :data:`FLOAT_KELVIN` (NaN and beyond: 0 or the top)."""
+    finite = np.where(np.isfinite(kelvin), kelvin, 0.0)
+    return np.clip(np.rint(finite / FLOAT_KELVIN.scale_k), 0, 65535).astype(np.uint16)
 
 
 def _check_size(image: NDArray[np.generic], shape: tuple[int, int], path: Path, what: str) -> None:

@@ -22,6 +22,8 @@ spec                              what
                                   cannot be paired with a live camera: their clocks differ)
 ``recording:PATH``                a thermodepth recording (zarr), replayed bit for bit
 ``folder:PATH``                   a folder of images from any rig (rig.yaml, frames.csv)
+``rosbag:PATH[,KEY=TOPIC,...]``   a ROS 1 bag, rosbag2 folder or MCAP (:mod:`.rosbag`);
+                                  keys ``depth``, ``thermal``, ``vox`` name topics
 ================================  =========================================================
 
 A camera's N is its /dev/videoN (``2`` or ``/dev/video2``; none: the first of its kind found).
@@ -48,11 +50,11 @@ SPEC_HELP = (
     "sim[:thermal=CAMERA,depth=WxH,pace=real,faults=...], "
     "realsense[:SERIAL|:FILE.bag|:FILE.db3], lepton[:N], p2pro[:N], boson[:N], "
     "DEPTH+THERMAL (realsense+lepton, realsense+p2pro, ...), "
-    "recording:PATH, folder:PATH"
+    "recording:PATH, folder:PATH, rosbag:PATH[,depth=TOPIC,thermal=TOPIC,vox=TOPIC]"
 )
 DEPTH_CAMERAS = ("realsense",)
 THERMAL_CAMERAS = ("lepton", "p2pro", "boson")
-SOURCE_KINDS = ("sim", *DEPTH_CAMERAS, *THERMAL_CAMERAS, "recording", "folder")
+SOURCE_KINDS = ("sim", *DEPTH_CAMERAS, *THERMAL_CAMERAS, "recording", "folder", "rosbag")
 _JOIN = re.compile(r"\+(?=(?:" + "|".join(SOURCE_KINDS) + r")(?::|\+|$))")
 """A '+' that joins two source specs: one followed by a source name (so that a '+' inside a
 file name, as in ``realsense:take+1.db3``, is left alone)."""
@@ -62,9 +64,9 @@ SIM_KEYS = ("thermal", "depth", "pace", "faults")
 def split_spec(spec: str) -> list[tuple[str, str]]:
     """A source spec as ``(kind, argument)`` parts: ``"realsense:123+lepton:2"`` ->
     ``[("realsense", "123"), ("lepton", "2")]``. Parts are joined by a '+' followed by a
-    source name; a ``recording:PATH`` or ``folder:PATH`` spec is never split."""
+    source name; a ``recording:``, ``folder:`` or ``rosbag:`` spec is never split."""
     text = spec.strip()
-    whole = text.startswith(("recording:", "folder:"))
+    whole = text.startswith(("recording:", "folder:", "rosbag:"))
     parts = [text] if whole else _JOIN.split(text)
     return [(kind, arg) for kind, _, arg in (part.partition(":") for part in parts)]
 
@@ -213,6 +215,10 @@ def check_spec(spec: str) -> list[tuple[str, str]]:
             parse_faults(sim_options(arg).get("faults", ""))
         if kind in ("recording", "folder") and not arg:
             raise FieldError("source", f"{kind}:PATH needs a path")
+        if kind == "rosbag":
+            from .rosbag import parse_spec
+
+            parse_spec(arg)
         if kind in THERMAL_CAMERAS and arg:
             device_index(kind, arg)
     return parts
@@ -290,6 +296,10 @@ def open_source(
         if calibration is not None:
             _calibration_unused(text, "the simulated rig", warn)
         return src
+    if kind == "rosbag":
+        from .rosbag import RosbagSource
+
+        return RosbagSource(arg, calibration, warn, max_skew_s)
     if kind in ("recording", "folder"):
         if kind == "folder":
             from .folder import FolderSource

@@ -1,0 +1,164 @@
+"""A rig's data from ROS bags (``rosbag:PATH``): bags written from the simulator in every
+format (ROS 1, rosbag2 with db3 and mcap storage, standalone MCAP) replay into the same pairs,
+bit for bit, as the simulator gave; the calibration from camera_info and /tf_static; topics
+named as realsense-ros names them found by themselves; a wrong encoding, a missing
+camera_info, a size that disagrees: one line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rosbags", reason="ROS bags need the ros extra (rosbags)")
+
+from thermodepth.errors import InputError
+from thermodepth.io.ros import (
+    CAMERA_INFO,
+    FORMATS,
+    IMAGE,
+    TOPICS,
+    BagWriter,
+    camera_info_msg,
+    image_msg,
+    write_rig,
+)
+from thermodepth.sim import Rig, camera_pose, plate_scene
+from thermodepth.sources import open_source
+
+N = 6
+
+
+@pytest.fixture(scope="module")
+def rig() -> tuple[Any, list[Any]]:
+    sim = Rig(plate_scene(), camera_pose(1.0), seed=3)
+    return sim.calibration, list(sim.frames(N))
+
+
+def bag_of(path: Path, fmt: str, calibration: Any, pairs: list[Any]) -> Path:
+    with BagWriter(path, fmt) as writer:
+        for pair in pairs:
+            write_rig(writer, calibration, pair)
+    return path
+
+
+SUFFIX = {"mcap": ".mcap", "rosbag2": "", "rosbag2-mcap": "", "ros1": ".bag"}
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_every_format_replays_the_simulators_pairs_bit_for_bit(
+    fmt: str, rig: tuple[Any, list[Any]], tmp_path: Path
+) -> None:
+    calibration, pairs = rig
+    path = bag_of(tmp_path / f"rig{SUFFIX[fmt]}", fmt, calibration, pairs)
+    told: list[str] = []
+    spec = f"rosbag:{path},vox={TOPICS['vox']}"
+    with open_source(spec, warn=told.append) as source:
+        got = list(source)
+        cal = source.calibration
+    assert told == [
+        f"rosbag:{path}: depth {TOPICS['depth']}, thermal {TOPICS['thermal']}; depth intrinsics "
+        "from its camera_info; thermal intrinsics from its camera_info; thermal_from_depth "
+        "from /tf_static (thermodepth_depth_optical_frame -> thermodepth_thermal_optical_frame)"
+    ]
+    assert len(got) == N
+    for a, b in zip(pairs, got, strict=True):
+        assert np.array_equal(a.depth, b.depth) and a.depth.dtype == b.depth.dtype
+        assert np.array_equal(a.thermal, b.thermal) and b.thermal.dtype == np.uint16
+        assert abs(a.depth_time_s - b.depth_time_s) < 1e-9
+        assert abs(a.thermal_time_s - b.thermal_time_s) < 1e-9
+        assert abs(a.telemetry.fpa_temp_c - b.telemetry.fpa_temp_c) < 1e-9
+    assert cal.depth == calibration.depth and cal.thermal == calibration.thermal
+    assert cal.depth_scale_m == 0.001
+    t, u = cal.thermal_from_depth, calibration.thermal_from_depth
+    assert np.allclose(t.rotation, u.rotation, atol=1e-12)
+    assert np.allclose(t.translation_m, u.translation_m, atol=1e-12)
+
+
+def test_topics_as_realsense_ros_names_them_and_float_images(
+    rig: tuple[Any, list[Any]], tmp_path: Path
+) -> None:
+    """realsense-ros 4's depth topic beside its infrared (mono8) and aligned depth, a thermal
+    driver's 32FC1 kelvin; no /tf_static: thermal_from_depth from the calibration."""
+    calibration, pairs = rig
+    path = tmp_path / "rs.mcap"
+    depth = "/camera/camera/depth/image_rect_raw"
+    with BagWriter(path) as w:
+        s = w.store
+        for pair in pairs:
+            t = pair.depth_time_s
+            metres = pair.depth.astype(np.float32) * np.float32(calibration.depth_scale_m)
+            w.write(depth, IMAGE, image_msg(s, metres, t, "depth_optical"), t)
+            info = camera_info_msg(s, calibration.depth, t, "depth_optical")
+            w.write("/camera/camera/depth/camera_info", CAMERA_INFO, info, t)
+            aligned = image_msg(s, pair.depth, t, "color_optical")
+            w.write("/camera/camera/aligned_depth_to_color/image_raw", IMAGE, aligned, t)
+            ir = image_msg(s, np.zeros((4, 4), np.uint16), t, "ir", "16UC1")
+            ir.encoding, ir.step, ir.data = "mono8", 4, np.zeros(16, np.uint8)
+            w.write("/camera/camera/infra1/image_rect_raw", IMAGE, ir, t)
+            kelvin = pair.thermal.astype(np.float32) / 64 + 200  # any temperatures
+            t2 = pair.thermal_time_s
+            w.write("/lepton/image_kelvin", IMAGE, image_msg(s, kelvin, t2, "lepton"), t2)
+            info = camera_info_msg(s, calibration.thermal, t2, "lepton")
+            w.write("/lepton/camera_info", CAMERA_INFO, info, t2)
+    told: list[str] = []
+    with open_source(f"rosbag:{path}", calibration, warn=told.append) as source:
+        got = list(source)
+        assert source.calibration.thermal_from_depth == calibration.thermal_from_depth
+    assert told[0].endswith("thermal_from_depth from the calibration")
+    assert f"depth {depth}, thermal /lepton/image_kelvin" in told[0]
+    assert len(got) == N
+    for a, b in zip(pairs, got, strict=True):
+        assert np.array_equal(a.depth, b.depth)  # metres back to millimetres
+        assert b.telemetry.tlinear and b.telemetry.tlinear_resolution_k == 1 / 64
+        assert np.array_equal(b.thermal, a.thermal + 200 * 64)  # kelvin held at 1/64 K
+
+
+def one_line(spec: str, calibration: Any = None) -> str:
+    with pytest.raises(InputError) as info, open_source(spec, calibration) as source:
+        list(source)
+    assert "\n" not in str(info.value)
+    return str(info.value)
+
+
+def test_bad_bags_are_one_line(rig: tuple[Any, list[Any]], tmp_path: Path) -> None:
+    calibration, pairs = rig
+    good = bag_of(tmp_path / "good.mcap", "mcap", calibration, pairs[:2])
+    assert one_line(f"rosbag:{tmp_path / 'none.bag'}") == f"{tmp_path / 'none.bag'}: no such bag"
+    assert one_line(f"rosbag:{good},thermal=/nowhere").startswith(
+        f"rosbag:{good}: no topic /nowhere (thermal=); image topics: "
+    )
+    wrong = tmp_path / "wrong.mcap"
+    with BagWriter(wrong) as w:  # an 8-bit "thermal" image and no camera_info
+        for pair in pairs[:2]:
+            t = pair.depth_time_s
+            w.write(TOPICS["depth"], IMAGE, image_msg(w.store, pair.depth, t, "d"), t)
+            w.write(TOPICS["thermal"], IMAGE, image_msg(w.store, pair.thermal, t, "t"), t)
+    assert one_line(f"rosbag:{wrong}") == (
+        f"rosbag:{wrong}: no camera_info beside {TOPICS['depth']} and no calibration "
+        "(--calibration) to give its intrinsics"
+    )
+    small = tmp_path / "small.mcap"
+    with BagWriter(small) as w:  # the thermal camera's images smaller than its camera_info
+        for pair in pairs[:2]:
+            t = pair.thermal_time_s
+            w.write(TOPICS["depth"], IMAGE, image_msg(w.store, pair.depth, t, "d"), t)
+            w.write(TOPICS["thermal"], IMAGE, image_msg(w.store, pair.thermal[:60], t, "t"), t)
+    message = one_line(f"rosbag:{small}", calibration)
+    assert message == (
+        f"rosbag:{small}: {TOPICS['thermal']} message 0: 160x60 but its camera is 160x120"
+    )
+    rgb = tmp_path / "rgb.mcap"
+    with BagWriter(rgb) as w:
+        for pair in pairs[:2]:
+            t = pair.thermal_time_s
+            w.write(TOPICS["depth"], IMAGE, image_msg(w.store, pair.depth, t, "d"), t)
+            msg = image_msg(w.store, pair.thermal, t, "t")
+            msg.encoding = "rgb8"
+            w.write(TOPICS["thermal"], IMAGE, msg, t)
+    assert one_line(f"rosbag:{rgb},thermal={TOPICS['thermal']}", calibration) == (
+        f"rosbag:{rgb}: {TOPICS['thermal']} message 0: encoding 'rgb8'; expected one of "
+        "16UC1, mono16, 32FC1"
+    )
