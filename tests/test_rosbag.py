@@ -162,3 +162,70 @@ def test_bad_bags_are_one_line(rig: tuple[Any, list[Any]], tmp_path: Path) -> No
         f"rosbag:{rgb}: {TOPICS['thermal']} message 0: encoding 'rgb8'; expected one of "
         "16UC1, mono16, 32FC1"
     )
+
+
+def test_an_export_read_by_foxglove_s_reader_and_by_rosbags(tmp_path: Path) -> None:
+    pytest.importorskip("mcap_ros2", reason="the second reader: mcap-ros2-support (dev extra)")
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.highlevel import AnyReader
+
+    from thermodepth.app.run import RunOptions, run
+    from thermodepth.io.pointcloud import read_ply, write_ply
+    from thermodepth.sinks import CallbackSink
+    from thermodepth.sinks.bag import TOPICS as FUSED
+    from thermodepth.sinks.bag import BagSink
+
+    settings = tmp_path / "s.yaml"
+    settings.write_text("hotspots: {threshold_c: 50}\nalarms:\n  - {name: hot, above_c: 60}\n")
+    fused: list[Any] = []
+    pairs: list[Any] = []
+    out = tmp_path / "run.mcap"
+    result = run(
+        RunOptions("sim", settings, frames=N),
+        [BagSink(out, cloud_points=10**7), CallbackSink(fused.append)],
+    )
+    assert result.frames == N
+    counts: dict[str, int] = {}
+    clouds, infos = [], {}
+    with out.open("rb") as f:
+        for _, channel, _, msg in make_reader(
+            f, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.topic == FUSED["cloud"]:
+                clouds.append(msg)
+            if channel.topic.endswith("camera_info"):
+                infos[channel.topic] = msg
+    per_frame = [TOPICS[k] for k in ("depth", "depth_info", "thermal", "thermal_info", "vox")]
+    per_frame += [FUSED[k] for k in ("temperature", "cloud", "markers", "measurements")]
+    assert counts == {"/tf_static": 1, **{t: N for t in per_frame}, FUSED["alarms"]: 1}
+    with AnyReader([out]) as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == counts
+    cal = fused[0].calibration
+    k = infos[TOPICS["thermal_info"]].k
+    assert (k[0], k[2], k[4], k[5]) == (
+        cal.thermal.fx,
+        cal.thermal.cx,
+        cal.thermal.fy,
+        cal.thermal.cy,
+    )
+    assert list(infos[TOPICS["depth_info"]].d) == list(cal.depth.distortion)
+    for frame, cloud in zip(fused, clouds, strict=True):
+        points, temps = frame.points()
+        ply = write_ply(tmp_path / f"f{frame.index}.ply", points, temps, 20.0, 80.0)
+        ply_points, ply_temps = read_ply(ply)
+        got = np.frombuffer(bytes(cloud.data), np.dtype([(f, "<f4") for f in "xyzt"]))
+        assert cloud.width == len(ply_temps) and [f.name for f in cloud.fields] == [
+            "x",
+            "y",
+            "z",
+            "temperature",
+        ]
+        assert np.array_equal(got["t"], ply_temps, equal_nan=True)  # NaN: the shutter closed
+        assert np.array_equal(np.stack([got["x"], got["y"], got["z"]], -1), ply_points)
+    # and the export replays as a rig: its raw streams found among its own topics
+    with open_source(f"rosbag:{out}") as source:
+        pairs = list(source)
+    assert [p.index for p in pairs] == list(range(N))
+    assert all(np.array_equal(p.depth, f.depth) for p, f in zip(pairs, fused, strict=True))

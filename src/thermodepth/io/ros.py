@@ -145,7 +145,8 @@ def transform_between(
 # -- writing ------------------------------------------------------------------------------------
 
 
-def _header(store: Any, time_s: float, frame_id: str) -> Any:
+def header_msg(store: Any, time_s: float, frame_id: str) -> Any:
+    """A std_msgs/Header stamped ``time_s`` (s) in ``frame_id`` (ROS 1: seq 0)."""
     t = store.types
     ns = round(time_s * 1e9)
     stamp = t["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
@@ -163,7 +164,7 @@ def image_msg(
     encoding = encoding or ("16UC1" if wide else "32FC1")
     pixels = np.ascontiguousarray(image, dtype="<u2" if wide else "<f4")
     return store.types[IMAGE](
-        header=_header(store, time_s, frame_id),
+        header=header_msg(store, time_s, frame_id),
         height=pixels.shape[0], width=pixels.shape[1], encoding=encoding, is_bigendian=0,
         step=pixels.strides[0], data=pixels.reshape(-1).view(np.uint8),
     )  # fmt: skip
@@ -182,7 +183,7 @@ def camera_info_msg(store: Any, intr: Intrinsics, time_s: float, frame_id: str) 
         x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
     )
     return t[CAMERA_INFO](
-        header=_header(store, time_s, frame_id), height=intr.height, width=intr.width,
+        header=header_msg(store, time_s, frame_id), height=intr.height, width=intr.width,
         distortion_model="plumb_bob", **arrays, binning_x=0, binning_y=0, roi=roi,
     )  # fmt: skip
 
@@ -194,7 +195,7 @@ def tf_msg(store: Any, transforms: list[RigidTransform], time_s: float) -> Any:
     for tr in transforms:
         x, y, z, w = matrix_quaternion(tr.rotation)
         out.append(t["geometry_msgs/msg/TransformStamped"](
-            header=_header(store, time_s, tr.to_frame), child_frame_id=tr.from_frame,
+            header=header_msg(store, time_s, tr.to_frame), child_frame_id=tr.from_frame,
             transform=t["geometry_msgs/msg/Transform"](
                 translation=t["geometry_msgs/msg/Vector3"](*map(float, tr.translation_m)),
                 rotation=t["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
@@ -352,7 +353,7 @@ def write_rig(writer: BagWriter, calibration: Calibration, pair: FramePair) -> N
     if np.isfinite(vox_c):
         t = pair.thermal_time_s
         msg = s.types[TEMPERATURE](
-            header=_header(s, t, FRAMES["thermal"]), temperature=float(vox_c), variance=0.0
+            header=header_msg(s, t, FRAMES["thermal"]), temperature=float(vox_c), variance=0.0
         )
         writer.write(TOPICS["vox"], TEMPERATURE, msg, t)
     for what, image, t in (("depth", pair.depth, pair.depth_time_s),

@@ -1,0 +1,182 @@
+"""A session into a ROS bag for ROS tools and Foxglove (``thermodepth export``; the ``ros``
+extra): ROS 2 messages in an MCAP file (or a rosbag2 folder, or a ROS 1 bag,
+:data:`~thermodepth.io.ros.FORMATS`).
+
+Topics (``/thermodepth/...``; frames ``thermodepth_depth_optical_frame`` and
+``thermodepth_thermal_optical_frame``):
+
+- ``depth/image_rect_raw`` (16UC1, the depth unit) and ``depth/camera_info``;
+  ``thermal/image_raw`` (mono16, the camera's values) and ``thermal/camera_info``;
+  ``thermal/sensor_temperature`` (sensor_msgs/Temperature, C); ``/tf_static`` (the depth
+  frame's pose in the thermal's): every pair, as :func:`~thermodepth.io.ros.write_rig`;
+- per fused frame, at its thermal capture time: ``registered/temperature_c`` (32FC1, C, on
+  the depth grid, NaN without a temperature); ``cloud`` (sensor_msgs/PointCloud2: x, y, z in
+  m, depth frame, and a float32 ``temperature`` in C, every k-th point so that at most
+  ``cloud_points`` remain); ``markers`` (visualization_msgs/MarkerArray: each hotspot a
+  sphere of its area with its reading as text); ``measurements`` and ``alarms``
+  (std_msgs/String, JSON as MQTT publishes them).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..calibration import Calibration
+from ..errors import InputError
+from ..frames import Match, StreamEvent
+from ..io.measurements import jsonable
+from ..io.ros import FRAMES, BagWriter, header_msg, image_msg, write_rig
+from ..pipeline import FusedFrame
+from .base import BaseSink, RunContext, SessionResult
+from .mqtt import alarm_message, measurement_message
+
+PREFIX = "/thermodepth"
+TOPICS = {
+    "temperature": f"{PREFIX}/registered/temperature_c",
+    "cloud": f"{PREFIX}/cloud",
+    "markers": f"{PREFIX}/markers",
+    "measurements": f"{PREFIX}/measurements",
+    "alarms": f"{PREFIX}/alarms",
+}
+CLOUD = "sensor_msgs/msg/PointCloud2"
+MARKERS = "visualization_msgs/msg/MarkerArray"
+STRING = "std_msgs/msg/String"
+CLOUD_FIELDS = ("x", "y", "z", "temperature")
+
+
+def cloud_msg(store: Any, points_m: Any, temp_c: Any, time_s: float, frame_id: str) -> Any:
+    """A PointCloud2 of points (N, 3) m and temperatures (N,) C: four float32 a point."""
+    t = store.types
+    rec = np.empty(len(points_m), np.dtype([(f, "<f4") for f in CLOUD_FIELDS]))
+    for i, name in enumerate(("x", "y", "z")):
+        rec[name] = points_m[:, i]
+    rec["temperature"] = temp_c
+    field_type = t["sensor_msgs/msg/PointField"]
+    fields = [field_type(name=f, offset=4 * i, datatype=field_type.FLOAT32, count=1)
+              for i, f in enumerate(CLOUD_FIELDS)]  # fmt: skip
+    return t[CLOUD](
+        header=header_msg(store, time_s, frame_id), height=1, width=len(rec), fields=fields,
+        is_bigendian=False, point_step=16, row_step=16 * len(rec),
+        data=rec.view(np.uint8).reshape(-1), is_dense=False,
+    )  # fmt: skip
+
+
+def _marker(store: Any, **given: Any) -> Any:
+    """A Marker of ``given`` fields, the rest empty (ROS 2's Marker has more than ROS 1's)."""
+    t = store.types
+    marker = t["visualization_msgs/msg/Marker"]
+    empty: dict[str, Any] = {
+        "ns": "thermodepth", "id": 0, "type": marker.SPHERE, "action": marker.ADD,
+        "pose": t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
+            orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)),
+        "scale": t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+        "color": t["std_msgs/msg/ColorRGBA"](r=0.0, g=0.0, b=0.0, a=0.0),
+        "lifetime": t["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
+        "frame_locked": False, "points": [], "colors": [], "text": "", "mesh_resource": "",
+        "mesh_use_embedded_materials": False, "texture_resource": "", "uv_coordinates": [],
+    }  # fmt: skip
+    fields = marker.__dataclass_fields__
+    if "texture" in fields:
+        empty["texture"] = t["sensor_msgs/msg/CompressedImage"](
+            header=given["header"], format="", data=np.zeros(0, np.uint8)
+        )
+        empty["mesh_file"] = t["visualization_msgs/msg/MeshFile"](
+            filename="", data=np.zeros(0, np.uint8)
+        )
+    return marker(**{k: v for k, v in {**empty, **given}.items() if k in fields})
+
+
+def markers_msg(store: Any, fused: FusedFrame, frame_id: str) -> Any:
+    """Each hotspot a sphere of its area (cyan: resolvable; yellow: too small to read true)
+    with its reading above it, after a DELETEALL of the frame before's."""
+    t = store.types
+    kind = t["visualization_msgs/msg/Marker"]
+    header = header_msg(store, fused.thermal_time_s, frame_id)
+    out = [_marker(store, header=header, action=kind.DELETEALL)]
+    for i, hs in enumerate(fused.hotspots):
+        x, y, z = (float(c) for c in hs.centroid_m)
+        size = max(0.01, math.sqrt(hs.area_m2))
+        r, g, b = (0.0, 1.0, 1.0) if hs.resolvable else (1.0, 1.0, 0.0)
+        where = t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](x=x, y=y, z=z),
+            orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        )
+        above = t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](x=x, y=y - size, z=z),
+            orientation=where.orientation,
+        )
+        color = t["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=0.8)
+        scale = t["geometry_msgs/msg/Vector3"](x=size, y=size, z=size)
+        out.append(_marker(store, header=header, id=2 * i, pose=where, color=color, scale=scale))
+        out.append(_marker(
+            store, header=header, id=2 * i + 1, type=kind.TEXT_VIEW_FACING, pose=above,
+            color=color, scale=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.03),
+            text=f"{hs.max_c:.1f} C, {hs.distance_m:.2f} m",
+        ))  # fmt: skip
+    return t[MARKERS](markers=out)
+
+
+class BagSink(BaseSink):
+    """A session into a new bag at ``path`` (module docstring); ``fmt`` and ``compression``
+    as :class:`~thermodepth.io.ros.BagWriter`; ``cloud_points``: the most points a cloud
+    keeps."""
+
+    def __init__(
+        self, path: Path, fmt: str = "mcap", compression: str = "none", cloud_points: int = 100_000
+    ) -> None:
+        self.path, self.fmt, self.compression = Path(path), fmt, compression
+        self.cloud_points = cloud_points
+        self.writer: BagWriter | None = None
+        self.calibration: Calibration | None = None
+        self.pairs = self.frames = 0
+
+    def check(self) -> None:
+        if self.path.exists():
+            raise InputError(f"{self.path}: exists already; give a new path")
+
+    def open(self, context: RunContext) -> None:
+        self.calibration = context.calibration or context.source.calibration
+        if self.calibration is None:
+            raise InputError(f"{self.path}: a bag needs the rig's calibration (--settings)")
+        self.writer = BagWriter(self.path, self.fmt, self.compression)
+
+    def event(self, event: StreamEvent) -> None:
+        if isinstance(event, Match) and self.writer is not None:
+            assert self.calibration is not None
+            write_rig(self.writer, self.calibration, event.pair)
+            self.pairs += 1
+
+    def frame(self, fused: FusedFrame) -> None:
+        w = self.writer
+        if w is None:
+            return
+        s, t, depth_frame = w.store, fused.thermal_time_s, FRAMES["depth"]
+        temp = np.asarray(fused.temp_depth_c, np.float32)
+        w.write(TOPICS["temperature"], "sensor_msgs/msg/Image",
+                image_msg(s, temp, t, depth_frame), t)  # fmt: skip
+        points, temps = fused.points()
+        step = max(1, math.ceil(len(points) / self.cloud_points))
+        w.write(
+            TOPICS["cloud"], CLOUD, cloud_msg(s, points[::step], temps[::step], t, depth_frame), t
+        )
+        w.write(TOPICS["markers"], MARKERS, markers_msg(s, fused, depth_frame), t)
+        text = json.dumps(jsonable(measurement_message(fused)))
+        w.write(TOPICS["measurements"], STRING, s.types[STRING](data=text), t)
+        for event in fused.events:
+            text = json.dumps(jsonable(alarm_message(event, fused)))
+            w.write(TOPICS["alarms"], STRING, s.types[STRING](data=text), t)
+        self.frames += 1
+
+    def close(self, result: SessionResult) -> None:
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+
+    def summary(self) -> str | None:
+        return f"{self.path}: {self.pairs} pairs and {self.frames} fused frames as ROS messages"
