@@ -18,6 +18,7 @@ BENCHMARKS = [
     "bench_detection",
     "bench_monitor",
     "bench_dashboard",
+    "bench_export",
 ]
 
 

@@ -67,7 +67,7 @@ def collect_sweep_cmd(
         str,
         typer.Option(
             help="realsense+lepton (live: any depth + thermal camera), recording:PATH, "
-            "folder:PATH, or sim (see README)."
+            "folder:PATH, rosbag:PATH, or sim (see README)."
         ),
     ] = "realsense+lepton",
     target: Annotated[

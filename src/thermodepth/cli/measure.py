@@ -55,7 +55,8 @@ def record_cmd(
             "--source",
             "-s",
             help="sim, realsense[:SERIAL|:FILE], lepton[:N], p2pro[:N], boson[:N], "
-            "realsense+lepton (any depth + thermal camera), recording:PATH, folder:PATH.",
+            "realsense+lepton (any depth + thermal camera), recording:PATH, folder:PATH, "
+            "rosbag:PATH.",
         ),
     ],
     out: Annotated[Path, typer.Option("-o", "--out", help="Recording to create (.zarr).")],
