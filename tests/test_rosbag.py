@@ -229,3 +229,61 @@ def test_an_export_read_by_foxglove_s_reader_and_by_rosbags(tmp_path: Path) -> N
         pairs = list(source)
     assert [p.index for p in pairs] == list(range(N))
     assert all(np.array_equal(p.depth, f.depth) for p, f in zip(pairs, fused, strict=True))
+
+
+def test_a_run_live_in_foxglove_read_as_its_websocket_client_reads_it() -> None:
+    """run --foxglove: the server advertises every topic with its ROS 2 schema; a client
+    subscribed to the cloud gets CDR that rosbags decodes into x, y, z and temperature."""
+    pytest.importorskip("foxglove", reason="the live view needs the foxglove extra")
+    websockets = pytest.importorskip("websockets", reason="the test's client (dev extra)")
+    import asyncio
+    import json
+    import struct
+    import threading
+
+    from mqtt_broker import free_port
+    from thermodepth.app.run import RunOptions, run
+    from thermodepth.io.ros import typestore
+    from thermodepth.sinks import CallbackSink
+    from thermodepth.sinks.bag import TOPICS as FUSED
+
+    fused, done = threading.Event(), threading.Event()
+
+    def slowly(frame: Any) -> None:  # the run goes on, slowly, while the client listens
+        fused.set()
+        done.wait(0.3)
+
+    url = f"ws://127.0.0.1:{(port := free_port())}"
+    options = RunOptions("sim", None, frames=60, foxglove=f"127.0.0.1:{port}")
+    runner = threading.Thread(target=run, args=(options, [CallbackSink(slowly)]))
+    runner.start()
+
+    async def listen() -> tuple[dict[str, Any], bytes]:
+        async with websockets.connect(url, subprotocols=["foxglove.sdk.v1"]) as ws:
+            channels: dict[str, Any] = {}
+            while FUSED["cloud"] not in channels:
+                msg = json.loads(await asyncio.wait_for(ws.recv(), 10))
+                if msg["op"] == "advertise":
+                    channels.update({c["topic"]: c for c in msg["channels"]})
+            cloud = channels[FUSED["cloud"]]
+            sub = {"op": "subscribe", "subscriptions": [{"id": 3, "channelId": cloud["id"]}]}
+            await ws.send(json.dumps(sub))
+            while True:
+                data = await asyncio.wait_for(ws.recv(), 10)
+                if isinstance(data, bytes) and data[0] == 1:  # a message's data
+                    return channels, data
+
+    try:
+        assert fused.wait(60)
+        channels, data = asyncio.run(listen())
+    finally:
+        done.set()
+        runner.join(60)
+    assert TOPICS["thermal"] in channels and FUSED["markers"] in channels
+    cloud = channels[FUSED["cloud"]]
+    assert (cloud["encoding"], cloud["schemaEncoding"]) == ("cdr", "ros2msg")
+    assert cloud["schemaName"] == "sensor_msgs/msg/PointCloud2"
+    assert struct.unpack_from("<I", data, 1) == (3,)  # our subscription
+    msg = typestore().deserialize_cdr(data[13:], "sensor_msgs/msg/PointCloud2")
+    assert [f.name for f in msg.fields] == ["x", "y", "z", "temperature"]
+    assert 0 < msg.width <= 50_000

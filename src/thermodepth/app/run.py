@@ -38,7 +38,8 @@ class RunOptions:
     viewer / viewer_save / viewer_connect: show the run in rerun (a viewer spawned, an
     ``.rrd`` file, a running viewer's address; the settings' ``viewer`` section says how);
     snapshots: with out_dir, an overlay PNG and a PLY every so many frames and at every alarm;
-    depth_mode, thermal_camera: the cameras (:class:`SourceChoice`).
+    depth_mode, thermal_camera: the cameras (:class:`SourceChoice`); foxglove: serve the run
+    live to Foxglove on this ``HOST:PORT`` (:mod:`~thermodepth.sinks.foxglove`).
     """
 
     source: str = "sim"
@@ -55,6 +56,7 @@ class RunOptions:
     snapshots: int | None = None
     depth_mode: str | None = None
     thermal_camera: str | None = None
+    foxglove: str | None = None
 
     def check(self) -> None:
         """One FieldError for an option that cannot be."""
@@ -64,6 +66,10 @@ class RunOptions:
         if self.mqtt is not None:
             MqttTarget.parse(self.mqtt)
         check_viewer_options(self.viewer, self.viewer_save, self.viewer_connect)
+        if self.foxglove is not None:
+            from ..sinks.foxglove import parse_address
+
+            parse_address(self.foxglove)
         if self.snapshots is not None and self.out_dir is None:
             raise FieldError("snapshots", "snapshots go into the measurements folder: give --out")
 
@@ -153,9 +159,18 @@ SINK_BUILDERS: list[SinkBuilder] = [
         if o.snapshots is not None and o.out_dir is not None
         else None
     ),
+    lambda o, s, w: foxglove_sink(o.foxglove) if o.foxglove is not None else None,
 ]
 """The sinks a run's options ask for, one builder each (None: not asked for), from the
 options, the settings and where warnings go."""
+
+
+def foxglove_sink(address: str) -> Sink:
+    """The run as ROS messages to a live Foxglove server on ``address``."""
+    from ..sinks.bag import BagSink
+    from ..sinks.foxglove import FoxgloveWriter
+
+    return BagSink(None, cloud_points=50_000, open_writer=lambda: FoxgloveWriter(address))
 
 
 def provenance(settings_path: Path | None, settings: Settings) -> dict[str, Any]:

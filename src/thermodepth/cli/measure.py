@@ -209,6 +209,14 @@ def run_cmd(
     ] = None,
     depth_mode: DepthMode = None,
     thermal_camera: ThermalCamera = None,
+    foxglove: Annotated[
+        str | None,
+        typer.Option(
+            metavar="HOST:PORT",
+            help="Serve the run live to Foxglove (foxglove extra), e.g. 127.0.0.1:8765: "
+            "ROS 2 messages as export writes them, each topic at most 5 a second.",
+        ),
+    ] = None,
 ) -> None:
     """Fuse a stream, print live measurements and alarms (Ctrl-C stops cleanly)."""
     from ..alarms import RAISED
@@ -230,6 +238,7 @@ def run_cmd(
         snapshots=snapshots,
         depth_mode=depth_mode,
         thermal_camera=thermal_camera,
+        foxglove=foxglove,
     )
     result = run(options, [] if quiet else [CallbackSink(print_frame)], warn_line)
     console.print(

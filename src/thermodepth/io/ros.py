@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -206,6 +206,22 @@ def tf_msg(store: Any, transforms: list[RigidTransform], time_s: float) -> Any:
 
 # -- bags ---------------------------------------------------------------------------------------
 
+
+class MessageWriter(Protocol):
+    """Where ROS messages go: a bag (:class:`BagWriter`) or a live Foxglove server
+    (:class:`~thermodepth.sinks.foxglove.FoxgloveWriter`)."""
+
+    store: Any
+
+    def write(
+        self, topic: str, msgtype: str, msg: Any, time_s: float, latched: bool = False
+    ) -> None: ...
+
+    def __contains__(self, topic: str) -> bool: ...
+
+    def close(self) -> None: ...
+
+
 FORMATS = ("mcap", "rosbag2", "rosbag2-mcap", "ros1")
 """What :class:`BagWriter` writes: a standalone MCAP of ROS 2 messages (profile ``ros2``,
 ``ros2msg`` schemas, CDR), a rosbag2 folder with ``.db3`` or ``.mcap`` storage (metadata
@@ -339,7 +355,7 @@ FRAMES = {
 TEMPERATURE = "sensor_msgs/msg/Temperature"
 
 
-def write_rig(writer: BagWriter, calibration: Calibration, pair: FramePair) -> None:
+def write_rig(writer: MessageWriter, calibration: Calibration, pair: FramePair) -> None:
     """A pair's raw streams: depth (16UC1, the calibration's unit), thermal (mono16 as the
     camera gave it), each camera_info, the sensor temperature (C, where told; before the
     thermal image, which takes the latest) and, with the first pair, ``/tf_static``

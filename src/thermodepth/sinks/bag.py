@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,7 @@ from ..calibration import Calibration
 from ..errors import InputError
 from ..frames import Match, StreamEvent
 from ..io.measurements import jsonable
-from ..io.ros import FRAMES, BagWriter, header_msg, image_msg, write_rig
+from ..io.ros import FRAMES, BagWriter, MessageWriter, header_msg, image_msg, write_rig
 from ..pipeline import FusedFrame
 from .base import BaseSink, RunContext, SessionResult
 from .mqtt import alarm_message, measurement_message
@@ -123,28 +124,38 @@ def markers_msg(store: Any, fused: FusedFrame, frame_id: str) -> Any:
 
 
 class BagSink(BaseSink):
-    """A session into a new bag at ``path`` (module docstring); ``fmt`` and ``compression``
-    as :class:`~thermodepth.io.ros.BagWriter`; ``cloud_points``: the most points a cloud
-    keeps."""
+    """A session as ROS messages (module docstring) into a new bag at ``path`` (``fmt`` and
+    ``compression`` as :class:`~thermodepth.io.ros.BagWriter`), or to what ``open_writer()``
+    opens (a live server); ``cloud_points``: the most points a cloud keeps."""
 
     def __init__(
-        self, path: Path, fmt: str = "mcap", compression: str = "none", cloud_points: int = 100_000
+        self,
+        path: Path | None,
+        fmt: str = "mcap",
+        compression: str = "none",
+        cloud_points: int = 100_000,
+        open_writer: Callable[[], MessageWriter] | None = None,
     ) -> None:
-        self.path, self.fmt, self.compression = Path(path), fmt, compression
-        self.cloud_points = cloud_points
-        self.writer: BagWriter | None = None
+        self.path = None if path is None else Path(path)
+        self.fmt, self.compression, self.cloud_points = fmt, compression, cloud_points
+        self.open_writer = open_writer
+        self.writer: MessageWriter | None = None
         self.calibration: Calibration | None = None
         self.pairs = self.frames = 0
 
     def check(self) -> None:
-        if self.path.exists():
+        if self.path is not None and self.path.exists():
             raise InputError(f"{self.path}: exists already; give a new path")
 
     def open(self, context: RunContext) -> None:
         self.calibration = context.calibration or context.source.calibration
         if self.calibration is None:
-            raise InputError(f"{self.path}: a bag needs the rig's calibration (--settings)")
-        self.writer = BagWriter(self.path, self.fmt, self.compression)
+            raise InputError("ROS messages need the rig's calibration (--settings)")
+        if self.open_writer is not None:
+            self.writer = self.open_writer()
+        else:
+            assert self.path is not None
+            self.writer = BagWriter(self.path, self.fmt, self.compression)
 
     def event(self, event: StreamEvent) -> None:
         if isinstance(event, Match) and self.writer is not None:
@@ -179,4 +190,5 @@ class BagSink(BaseSink):
             self.writer = None
 
     def summary(self) -> str | None:
-        return f"{self.path}: {self.pairs} pairs and {self.frames} fused frames as ROS messages"
+        where = self.path if self.path is not None else "Foxglove"
+        return f"{where}: {self.pairs} pairs and {self.frames} fused frames as ROS messages"
