@@ -287,3 +287,19 @@ def test_a_run_live_in_foxglove_read_as_its_websocket_client_reads_it() -> None:
     msg = typestore().deserialize_cdr(data[13:], "sensor_msgs/msg/PointCloud2")
     assert [f.name for f in msg.fields] == ["x", "y", "z", "temperature"]
     assert 0 < msg.width <= 50_000
+
+
+def test_a_bag_recorded_replays_as_the_bag(rig: tuple[Any, list[Any]], tmp_path: Path) -> None:
+    """record --source rosbag:PATH: the recording (for batch, view, ...) holds the bag's
+    pairs and the calibration the bag told."""
+    from thermodepth.app.record import RecordOptions, record
+
+    calibration, pairs = rig
+    bag = bag_of(tmp_path / "rig.bag", "ros1", calibration, pairs)
+    record(RecordOptions(f"rosbag:{bag}", tmp_path / "take.zarr"))
+    with open_source(f"recording:{tmp_path / 'take.zarr'}") as replay:
+        got = list(replay)
+        assert replay.calibration.thermal == calibration.thermal
+    assert [np.array_equal(a.thermal, b.thermal) for a, b in zip(pairs, got, strict=True)] == [
+        True
+    ] * N
