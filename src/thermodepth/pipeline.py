@@ -42,6 +42,7 @@ from pydantic import AfterValidator, Field, PrivateAttr, model_validator
 
 from .alarms import AlarmRule, AlarmTracker
 from .calibration import Calibration
+from .camera import pixel_rays
 from .compensation import CompensationModel, Flag, NoCompensation, load_model
 from .conditions import ConditionsSchema, Radiometry, checked_condition
 from .errors import FieldError, InputError, repeated
@@ -392,13 +393,16 @@ class FusedFrame:
         z[self.depth == 0] = np.nan
         return z
 
-    def points(self) -> tuple[NDArray[np.float64], FloatArray]:
+    def points(self, every: int = 1) -> tuple[NDArray[np.float64], FloatArray]:
         """3D points (N, 3) in the depth camera's frame (m) of the depth pixels that have a
-        temperature, and their temperatures (N,) in C."""
-        ok = self.reason_depth == Reason.OK
-        v, u = np.nonzero(ok)
-        pts = self.calibration.depth.deproject(np.stack([u, v], -1), self.depth_m[ok])
-        return pts, self.temp_depth_c[ok]
+        temperature (every ``every``-th of them, in raster order), and their temperatures
+        (N,) in C. Each is its pixel's cached ray (:func:`~thermodepth.camera.pixel_rays`)
+        times its depth, as ``deproject`` gives it."""
+        kept = np.flatnonzero(self.reason_depth == Reason.OK)[::every]
+        x, y = pixel_rays(self.calibration.depth)
+        z = self.depth_m.ravel()[kept]
+        pts = np.stack([x.ravel()[kept] * z, y.ravel()[kept] * z, z], axis=-1)
+        return pts, self.temp_depth_c.ravel()[kept]
 
     def summary(self) -> dict[str, Any]:
         """Measurements as plain data (JSON lines)."""

@@ -316,7 +316,7 @@ class BagWriter:
         if self.fmt == "ros1":
             self._bag.write(conn, ns, self.store.serialize_ros1(msg, msgtype))
         elif self.fmt == "mcap":
-            data = bytes(self.store.serialize_cdr(msg, msgtype))
+            data = self.store.serialize_cdr(msg, msgtype)  # a buffer, not copied again
             self._mcap.add_message(conn, log_time=ns, publish_time=ns, data=data)
         else:
             self._bag.write(conn, ns, self.store.serialize_cdr(msg, msgtype))
