@@ -39,8 +39,8 @@ def rig() -> tuple[Any, list[Any]]:
 
 def bag_of(path: Path, fmt: str, calibration: Any, pairs: list[Any]) -> Path:
     with BagWriter(path, fmt) as writer:
-        for pair in pairs:
-            write_rig(writer, calibration, pair)
+        for i, pair in enumerate(pairs):
+            write_rig(writer, calibration, pair, with_tf=i == 0)
     return path
 
 

@@ -208,16 +208,22 @@ def tf_msg(store: Any, transforms: list[RigidTransform], time_s: float) -> Any:
 
 
 class MessageWriter(Protocol):
-    """Where ROS messages go: a bag (:class:`BagWriter`) or a live Foxglove server
-    (:class:`~thermodepth.sinks.foxglove.FoxgloveWriter`)."""
+    """What takes ROS messages built with its type store (:func:`write_rig` writes to one)."""
 
-    store: Any
+    @property
+    def store(self) -> Any: ...
 
     def write(
         self, topic: str, msgtype: str, msg: Any, time_s: float, latched: bool = False
     ) -> None: ...
 
-    def __contains__(self, topic: str) -> bool: ...
+
+class MessageOutput(MessageWriter, Protocol):
+    """Where ROS messages go: a bag (:class:`BagWriter`) or a live Foxglove server
+    (:class:`~thermodepth.sinks.foxglove.FoxgloveWriter`, ``live``: clients come and go,
+    so latched topics are sent again)."""
+
+    live: bool
 
     def close(self) -> None: ...
 
@@ -249,6 +255,7 @@ class BagWriter:
         if self.path.exists():
             raise InputError(f"{self.path}: exists already; give a new path")
         self.store = typestore(ros1=fmt == "ros1")
+        self.live = False
         self._topics: dict[str, Any] = {}
         self._bag: Any = None
         if fmt == "mcap":
@@ -321,10 +328,6 @@ class BagWriter:
         else:
             self._bag.write(conn, ns, self.store.serialize_cdr(msg, msgtype))
 
-    def __contains__(self, topic: str) -> bool:
-        """Whether ``topic`` has had a message."""
-        return topic in self._topics
-
     def close(self) -> None:
         if self.fmt == "mcap":
             self._mcap.finish()
@@ -355,13 +358,15 @@ FRAMES = {
 TEMPERATURE = "sensor_msgs/msg/Temperature"
 
 
-def write_rig(writer: MessageWriter, calibration: Calibration, pair: FramePair) -> None:
+def write_rig(
+    writer: MessageWriter, calibration: Calibration, pair: FramePair, with_tf: bool
+) -> None:
     """A pair's raw streams: depth (16UC1, the calibration's unit), thermal (mono16 as the
     camera gave it), each camera_info, the sensor temperature (C, where told; before the
-    thermal image, which takes the latest) and, with the first pair, ``/tf_static``
+    thermal image, which takes the latest) and, ``with_tf``, ``/tf_static``
     (thermal_from_depth as the depth frame's pose in the thermal's)."""
     s = writer.store
-    if "/tf_static" not in writer:
+    if with_tf:
         pose = calibration.thermal_from_depth
         tf = RigidTransform(pose.rotation, pose.translation_m, FRAMES["thermal"], FRAMES["depth"])
         writer.write("/tf_static", TF, tf_msg(s, [tf], pair.depth_time_s), pair.depth_time_s, True)

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import json
 import math
+import queue
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -31,8 +33,9 @@ from ..calibration import Calibration
 from ..errors import InputError
 from ..frames import Match, StreamEvent
 from ..io.measurements import jsonable
-from ..io.ros import FRAMES, BagWriter, MessageWriter, header_msg, image_msg, write_rig
+from ..io.ros import FRAMES, IMAGE, BagWriter, MessageOutput, header_msg, image_msg, write_rig
 from ..pipeline import FusedFrame
+from ..registration import Reason
 from .base import BaseSink, RunContext, SessionResult
 from .mqtt import alarm_message, measurement_message
 
@@ -123,6 +126,26 @@ def markers_msg(store: Any, fused: FusedFrame, frame_id: str) -> Any:
     return t[MARKERS](markers=out)
 
 
+QUEUED = 64  # messages waiting for the writer thread, at most (then fusing waits: none lost)
+
+
+class QueuedWriter:
+    """What :func:`~thermodepth.io.ros.write_rig` writes to: the sink's queue."""
+
+    def __init__(self, sink: BagSink) -> None:
+        self.sink = sink
+
+    @property
+    def store(self) -> Any:
+        assert self.sink.writer is not None
+        return self.sink.writer.store
+
+    def write(
+        self, topic: str, msgtype: str, msg: Any, time_s: float, latched: bool = False
+    ) -> None:
+        self.sink._put(topic, msgtype, msg, time_s, latched)
+
+
 class BagSink(BaseSink):
     """A session as ROS messages (module docstring) into a new bag at ``path`` (``fmt`` and
     ``compression`` as :class:`~thermodepth.io.ros.BagWriter`), or to what ``open_writer()``
@@ -134,14 +157,17 @@ class BagSink(BaseSink):
         fmt: str = "mcap",
         compression: str = "none",
         cloud_points: int = 100_000,
-        open_writer: Callable[[], MessageWriter] | None = None,
+        open_writer: Callable[[], MessageOutput] | None = None,
     ) -> None:
         self.path = None if path is None else Path(path)
         self.fmt, self.compression, self.cloud_points = fmt, compression, cloud_points
         self.open_writer = open_writer
-        self.writer: MessageWriter | None = None
+        self.writer: MessageOutput | None = None
         self.calibration: Calibration | None = None
         self.pairs = self.frames = 0
+        self._queue: queue.Queue[tuple[str, str, Any, float, bool] | None] = queue.Queue(QUEUED)
+        self._failed: Exception | None = None
+        self._queued = QueuedWriter(self)
 
     def check(self) -> None:
         if self.path is not None and self.path.exists():
@@ -156,38 +182,60 @@ class BagSink(BaseSink):
         else:
             assert self.path is not None
             self.writer = BagWriter(self.path, self.fmt, self.compression)
+        self._thread = threading.Thread(target=self._write, name="ros messages", daemon=True)
+        self._thread.start()
+
+    def _write(self) -> None:
+        """Serialise and write on a thread of its own (CDR copies, CRCs and the disk release
+        the GIL: the next frame is fused meanwhile)."""
+        assert self.writer is not None
+        while (item := self._queue.get()) is not None:
+            if self._failed is None:
+                try:
+                    self.writer.write(*item)
+                except Exception as exc:  # said at the next frame and at the end
+                    self._failed = exc
+
+    def _put(
+        self, topic: str, msgtype: str, msg: Any, time_s: float, latched: bool = False
+    ) -> None:
+        if self._failed is not None:
+            raise InputError(f"{self.path or 'Foxglove'}: cannot write ({self._failed})")
+        self._queue.put((topic, msgtype, msg, time_s, latched))
 
     def event(self, event: StreamEvent) -> None:
         if isinstance(event, Match) and self.writer is not None:
             assert self.calibration is not None
-            write_rig(self.writer, self.calibration, event.pair)
+            with_tf = self.pairs == 0 or self.writer.live  # a live client may come later
+            write_rig(self._queued, self.calibration, event.pair, with_tf)
             self.pairs += 1
 
     def frame(self, fused: FusedFrame) -> None:
-        w = self.writer
-        if w is None:
+        if self.writer is None:
             return
-        s, t, depth_frame = w.store, fused.thermal_time_s, FRAMES["depth"]
+        s, t, depth_frame = self.writer.store, fused.thermal_time_s, FRAMES["depth"]
         temp = np.asarray(fused.temp_depth_c, np.float32)
-        w.write(TOPICS["temperature"], "sensor_msgs/msg/Image",
-                image_msg(s, temp, t, depth_frame), t)  # fmt: skip
-        points, temps = fused.points()
-        step = max(1, math.ceil(len(points) / self.cloud_points))
-        w.write(
-            TOPICS["cloud"], CLOUD, cloud_msg(s, points[::step], temps[::step], t, depth_frame), t
-        )
-        w.write(TOPICS["markers"], MARKERS, markers_msg(s, fused, depth_frame), t)
+        self._put(TOPICS["temperature"], IMAGE, image_msg(s, temp, t, depth_frame), t)
+        valid = int(np.count_nonzero(fused.reason_depth == Reason.OK))
+        points, temps = fused.points(max(1, math.ceil(valid / self.cloud_points)))
+        self._put(TOPICS["cloud"], CLOUD, cloud_msg(s, points, temps, t, depth_frame), t)
+        self._put(TOPICS["markers"], MARKERS, markers_msg(s, fused, depth_frame), t)
         text = json.dumps(jsonable(measurement_message(fused)))
-        w.write(TOPICS["measurements"], STRING, s.types[STRING](data=text), t)
+        self._put(TOPICS["measurements"], STRING, s.types[STRING](data=text), t)
         for event in fused.events:
             text = json.dumps(jsonable(alarm_message(event, fused)))
-            w.write(TOPICS["alarms"], STRING, s.types[STRING](data=text), t)
+            self._put(TOPICS["alarms"], STRING, s.types[STRING](data=text), t)
         self.frames += 1
 
     def close(self, result: SessionResult) -> None:
-        if self.writer is not None:
-            self.writer.close()
-            self.writer = None
+        if self.writer is None:
+            return
+        self._queue.put(None)
+        self._thread.join()
+        self.writer.close()
+        self.writer = None
+        if self._failed is not None:
+            raise InputError(f"{self.path or 'Foxglove'}: cannot write ({self._failed})")
 
     def summary(self) -> str | None:
         where = self.path if self.path is not None else "Foxglove"

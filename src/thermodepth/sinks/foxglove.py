@@ -38,6 +38,7 @@ class FoxgloveWriter:
             raise InputError(INSTALL) from None
         host, port = parse_address(address)
         self.store = typestore()
+        self.live = True
         self.max_hz = max_hz
         try:
             self.server = foxglove.start_server(name="thermodepth", host=host, port=port)
@@ -65,11 +66,6 @@ class FoxgloveWriter:
             schema = Schema(name=msgtype, encoding="ros2msg", data=text.encode())
             channel = self._channels[topic] = Channel(topic, schema=schema, message_encoding="cdr")
         channel.log(bytes(self.store.serialize_cdr(msg, msgtype)), log_time=round(time_s * 1e9))
-
-    def __contains__(self, topic: str) -> bool:
-        """Whether ``topic`` needs no more messages: never, live (a latched topic is sent
-        again for the clients that connect later)."""
-        return False
 
     def close(self) -> None:
         self.server.stop()
