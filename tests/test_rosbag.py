@@ -303,3 +303,21 @@ def test_a_bag_recorded_replays_as_the_bag(rig: tuple[Any, list[Any]], tmp_path:
     assert [np.array_equal(a.thermal, b.thermal) for a, b in zip(pairs, got, strict=True)] == [
         True
     ] * N
+
+
+@pytest.mark.parametrize("fmt", ["rosbag2", "ros1"])
+def test_an_export_as_a_rosbag2_or_ros1_bag(fmt: str, tmp_path: Path) -> None:
+    """The writer thread holds the db3 bag's SQLite; a ROS 1 bag takes the same messages."""
+    from rosbags.highlevel import AnyReader
+
+    from thermodepth.app.run import RunOptions, run
+    from thermodepth.sinks.bag import TOPICS as FUSED
+    from thermodepth.sinks.bag import BagSink
+
+    out = tmp_path / ("bag" if fmt == "rosbag2" else "run.bag")
+    run(RunOptions("sim", None, frames=3), [BagSink(out, fmt)])
+    with AnyReader([out]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts["/tf_static"] == 1 and counts[FUSED["cloud"]] == counts[TOPICS["depth"]] == 3
+    with pytest.raises(InputError, match="exists already"):
+        run(RunOptions("sim", None, frames=1), [BagSink(out, fmt)])

@@ -167,6 +167,7 @@ class BagSink(BaseSink):
         self.pairs = self.frames = 0
         self._queue: queue.Queue[tuple[str, str, Any, float, bool] | None] = queue.Queue(QUEUED)
         self._failed: Exception | None = None
+        self._thread: threading.Thread | None = None
         self._queued = QueuedWriter(self)
 
     def check(self) -> None:
@@ -177,24 +178,41 @@ class BagSink(BaseSink):
         self.calibration = context.calibration or context.source.calibration
         if self.calibration is None:
             raise InputError("ROS messages need the rig's calibration (--settings)")
-        if self.open_writer is not None:
-            self.writer = self.open_writer()
-        else:
-            assert self.path is not None
-            self.writer = BagWriter(self.path, self.fmt, self.compression)
-        self._thread = threading.Thread(target=self._write, name="ros messages", daemon=True)
+        opened = threading.Event()
+        self._thread = threading.Thread(
+            target=self._write, args=(opened,), name="ros messages", daemon=True
+        )
         self._thread.start()
+        opened.wait()
+        if self._failed is not None:
+            self._thread.join()
+            self._thread = None
+            raise self._failed
 
-    def _write(self) -> None:
-        """Serialise and write on a thread of its own (CDR copies, CRCs and the disk release
-        the GIL: the next frame is fused meanwhile)."""
-        assert self.writer is not None
-        while (item := self._queue.get()) is not None:
-            if self._failed is None:
-                try:
-                    self.writer.write(*item)
-                except Exception as exc:  # said at the next frame and at the end
-                    self._failed = exc
+    def _write(self, opened: threading.Event) -> None:
+        """Open the writer, then serialise and write on this thread of its own (a db3 bag's
+        SQLite wants one thread; CDR copies, CRCs and the disk release the GIL, so the next
+        frame is fused meanwhile), and close it at the end."""
+        try:
+            if self.open_writer is not None:
+                self.writer = self.open_writer()
+            else:
+                assert self.path is not None
+                self.writer = BagWriter(self.path, self.fmt, self.compression)
+        except Exception as exc:
+            self._failed = exc
+            return
+        finally:
+            opened.set()
+        try:
+            while (item := self._queue.get()) is not None:
+                if self._failed is None:
+                    try:
+                        self.writer.write(*item)
+                    except Exception as exc:  # said at the next frame and at the end
+                        self._failed = exc
+        finally:
+            self.writer.close()
 
     def _put(
         self, topic: str, msgtype: str, msg: Any, time_s: float, latched: bool = False
@@ -228,12 +246,11 @@ class BagSink(BaseSink):
         self.frames += 1
 
     def close(self, result: SessionResult) -> None:
-        if self.writer is None:
+        if self._thread is None:
             return
         self._queue.put(None)
         self._thread.join()
-        self.writer.close()
-        self.writer = None
+        self._thread = None
         if self._failed is not None:
             raise InputError(f"{self.path or 'Foxglove'}: cannot write ({self._failed})")
 
