@@ -321,3 +321,22 @@ def test_an_export_as_a_rosbag2_or_ros1_bag(fmt: str, tmp_path: Path) -> None:
     assert counts["/tf_static"] == 1 and counts[FUSED["cloud"]] == counts[TOPICS["depth"]] == 3
     with pytest.raises(InputError, match="exists already"):
         run(RunOptions("sim", None, frames=1), [BagSink(out, fmt)])
+
+
+def test_the_infrared_image_of_each_depth_frame(tmp_path: Path) -> None:
+    """capture-board and record --ir from a bag: each depth frame with the infrared image of
+    its stamp (realsense-ros's infra1 topic found by itself)."""
+    sim = Rig(plate_scene(), camera_pose(1.0), seed=4)
+    sim.with_ir = True
+    pairs = list(sim.frames(4))
+    assert all(p.ir is not None for p in pairs)
+    bag = bag_of(tmp_path / "ir.mcap", "mcap", sim.calibration, pairs)
+    with open_source(f"rosbag:{bag}", with_ir=True) as source:
+        got = list(source)
+        assert source.settings()["topics"]["ir"] == TOPICS["ir"]
+    assert all(np.array_equal(a.ir, b.ir) for a, b in zip(pairs, got, strict=True))
+    with open_source(f"rosbag:{bag}") as source:  # not asked for: none read
+        assert all(p.ir is None for p in source)
+    assert one_line(f"rosbag:{bag},ir=/camera/infra9").startswith(
+        f"rosbag:{bag}: no topic /camera/infra9 (ir=)"
+    )

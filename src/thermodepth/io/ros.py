@@ -158,11 +158,12 @@ def header_msg(store: Any, time_s: float, frame_id: str) -> Any:
 def image_msg(
     store: Any, image: NDArray[Any], time_s: float, frame_id: str, encoding: str | None = None
 ) -> Any:
-    """An Image of a uint16 (``16UC1``, or ``mono16`` when told) or float32 (``32FC1``)
-    array, little-endian."""
-    wide = image.dtype == np.uint16
-    encoding = encoding or ("16UC1" if wide else "32FC1")
-    pixels = np.ascontiguousarray(image, dtype="<u2" if wide else "<f4")
+    """An Image of a uint8 (``mono8``), uint16 (``16UC1``, or ``mono16`` when told) or
+    float32 (``32FC1``) array, little-endian."""
+    kind = {np.dtype(np.uint8): ("mono8", "u1"), np.dtype(np.uint16): ("16UC1", "<u2")}
+    default, dtype = kind.get(image.dtype, ("32FC1", "<f4"))
+    encoding = encoding or default
+    pixels = np.ascontiguousarray(image, dtype=dtype)
     return store.types[IMAGE](
         header=header_msg(store, time_s, frame_id),
         height=pixels.shape[0], width=pixels.shape[1], encoding=encoding, is_bigendian=0,
@@ -348,6 +349,7 @@ TOPICS = {
     "thermal": "/thermodepth/thermal/image_raw",
     "thermal_info": "/thermodepth/thermal/camera_info",
     "vox": "/thermodepth/thermal/sensor_temperature",
+    "ir": "/thermodepth/infra1/image_rect_raw",
 }
 """Where a rig's raw streams go, named as realsense-ros names its own (each image with its
 camera_info beside it), so that ``rosbag:`` finds them by itself."""
@@ -362,7 +364,8 @@ def write_rig(
     writer: MessageWriter, calibration: Calibration, pair: FramePair, with_tf: bool
 ) -> None:
     """A pair's raw streams: depth (16UC1, the calibration's unit), thermal (mono16 as the
-    camera gave it), each camera_info, the sensor temperature (C, where told; before the
+    camera gave it), each camera_info, the infrared image (mono8, where the pair has one),
+    the sensor temperature (C, where told; before the
     thermal image, which takes the latest) and, ``with_tf``, ``/tf_static``
     (thermal_from_depth as the depth frame's pose in the thermal's)."""
     s = writer.store
@@ -384,3 +387,6 @@ def write_rig(
         encoding = "16UC1" if what == "depth" else "mono16"
         writer.write(TOPICS[what], IMAGE, image_msg(s, image, t, frame, encoding), t)
         writer.write(TOPICS[f"{what}_info"], CAMERA_INFO, camera_info_msg(s, intr, t, frame), t)
+    if pair.ir is not None:  # the depth camera's own infrared image, on the depth grid
+        t = pair.depth_time_s
+        writer.write(TOPICS["ir"], IMAGE, image_msg(s, pair.ir, t, FRAMES["depth"]), t)

@@ -7,8 +7,9 @@ Topics (``/thermodepth/...``; frames ``thermodepth_depth_optical_frame`` and
 
 - ``depth/image_rect_raw`` (16UC1, the depth unit) and ``depth/camera_info``;
   ``thermal/image_raw`` (mono16, the camera's values) and ``thermal/camera_info``;
-  ``thermal/sensor_temperature`` (sensor_msgs/Temperature, C); ``/tf_static`` (the depth
-  frame's pose in the thermal's): every pair, as :func:`~thermodepth.io.ros.write_rig`;
+  ``thermal/sensor_temperature`` (sensor_msgs/Temperature, C); ``infra1/image_rect_raw``
+  (mono8, where the source gives it); ``/tf_static`` (the depth frame's pose in the
+  thermal's): every pair, as :func:`~thermodepth.io.ros.write_rig`;
 - per fused frame, at its thermal capture time: ``registered/temperature_c`` (32FC1, C, on
   the depth grid, NaN without a temperature); ``cloud`` (sensor_msgs/PointCloud2: x, y, z in
   m, depth frame, and a float32 ``temperature`` in C, every k-th point so that at most

@@ -23,7 +23,7 @@ spec                              what
 ``recording:PATH``                a thermodepth recording (zarr), replayed bit for bit
 ``folder:PATH``                   a folder of images from any rig (rig.yaml, frames.csv)
 ``rosbag:PATH[,KEY=TOPIC,...]``   a ROS 1 bag, rosbag2 folder or MCAP (:mod:`.rosbag`);
-                                  keys ``depth``, ``thermal``, ``vox`` name topics
+                                  keys ``depth``, ``thermal``, ``ir``, ``vox`` name topics
 ================================  =========================================================
 
 A camera's N is its /dev/videoN (``2`` or ``/dev/video2``; none: the first of its kind found).
@@ -50,7 +50,7 @@ SPEC_HELP = (
     "sim[:thermal=CAMERA,depth=WxH,pace=real,faults=...], "
     "realsense[:SERIAL|:FILE.bag|:FILE.db3], lepton[:N], p2pro[:N], boson[:N], "
     "DEPTH+THERMAL (realsense+lepton, realsense+p2pro, ...), "
-    "recording:PATH, folder:PATH, rosbag:PATH[,depth=TOPIC,thermal=TOPIC,vox=TOPIC]"
+    "recording:PATH, folder:PATH, rosbag:PATH[,depth=TOPIC,thermal=TOPIC,ir=TOPIC,vox=TOPIC]"
 )
 DEPTH_CAMERAS = ("realsense",)
 THERMAL_CAMERAS = ("lepton", "p2pro", "boson")
@@ -299,7 +299,7 @@ def open_source(
     if kind == "rosbag":
         from .rosbag import RosbagSource
 
-        return RosbagSource(arg, calibration, warn, max_skew_s)
+        return RosbagSource(arg, calibration, warn, max_skew_s, with_ir)
     if kind in ("recording", "folder"):
         if kind == "folder":
             from .folder import FolderSource

@@ -1,4 +1,4 @@
-"""A rig's data from a ROS bag (``rosbag:PATH[,depth=TOPIC,thermal=TOPIC,vox=TOPIC]``): a
+"""A rig's data from a ROS bag (``rosbag:PATH[,depth=TOPIC,thermal=TOPIC,ir=TOPIC,vox=TOPIC]``):
 ROS 1 ``.bag``, a rosbag2 folder (``.db3`` or ``.mcap`` storage) or a standalone ``.mcap``,
 read with rosbags (:mod:`thermodepth.io.ros`).
 
@@ -9,7 +9,11 @@ image topic of 16-bit or float pixels, not a depth one (its first message says; 
 the one with ``thermal`` in its name); each with its ``camera_info`` beside it
 (``.../depth/camera_info``). Or they are named. ``vox`` names a topic of the thermal
 camera's sensor (VOx / FPA) temperature in C (``sensor_msgs/Temperature`` or
-``std_msgs/Float32``/``Float64``): each thermal frame takes the latest value.
+``std_msgs/Float32``/``Float64``): each thermal frame takes the latest value. With the
+infrared image asked for (``capture-board``, ``record --ir``), ``ir`` names its topic
+(mono8, the depth camera's own: realsense-ros's ``.../infra1/image_rect_raw``, found by
+itself as the one ``infra`` topic, ``infra1`` first); each depth frame takes the infrared
+image of its stamp.
 
 Depth ``16UC1`` is in the calibration's depth unit (mm without one), ``32FC1`` in metres
 (held as mm); thermal ``mono16``/``16UC1`` is of the kind the calibration's
@@ -54,7 +58,9 @@ from ..radiometry import RAW_COUNTS, ZERO_C_IN_K
 from .base import Source
 from .pairing import DEFAULT_MAX_SKEW_S, StreamPairer
 
-KEYS = ("depth", "thermal", "vox")
+KEYS = ("depth", "thermal", "ir", "vox")
+IR_ENCODINGS = {"mono8": "u1", "8UC1": "u1"}
+IR_WAIT_NS = 100_000_000  # a depth frame waits so long (bag time) for its infrared image
 DEPTH_WORD = re.compile(r"(^|[/_])depth")  # .../depth/..., aligned_depth_to_color; not thermodepth
 DEPTH_UNIT_M = 0.001  # 16UC1 depth without a calibration: millimetres (REP 118)
 
@@ -87,7 +93,9 @@ class RosbagSource(Source):
         calibration: Calibration | None = None,
         warn: Callable[[str], None] | None = None,
         max_skew_s: float = DEFAULT_MAX_SKEW_S,
+        with_ir: bool = False,
     ) -> None:
+        self.with_ir = with_ir
         try:
             from rosbags.highlevel import AnyReader, AnyReaderError
         except ImportError:
@@ -159,6 +167,15 @@ class RosbagSource(Source):
             thermal = wide[0]
         self.depth_topic, self.thermal_topic = depth, thermal
         self.vox_topic = self.options.get("vox")
+        self.ir_topic = self.options.get("ir")
+        if self.with_ir and self.ir_topic is None:
+            infra = sorted((t for t in images if "infra" in t), key=lambda t: "infra1" not in t)
+            if not infra:
+                raise InputError(
+                    f"{self.name}: no infrared image topic (image topics: {listed}); name it: "
+                    "rosbag:PATH,ir=TOPIC"
+                )
+            self.ir_topic = infra[0]
 
     def _info(self, image_topic: str) -> Any:
         """The CameraInfo beside an image topic (None: none)."""
@@ -213,21 +230,32 @@ class RosbagSource(Source):
     # -- the frames ---------------------------------------------------------------------------
 
     def settings(self) -> dict[str, Any]:
-        topics = {"depth": self.depth_topic, "thermal": self.thermal_topic, "vox": self.vox_topic}
+        topics = {"depth": self.depth_topic, "thermal": self.thermal_topic,
+                  "ir": self.ir_topic, "vox": self.vox_topic}  # fmt: skip
         return {"source": self.name, "topics": topics, "calibration": self.told}
 
     def events(self) -> Iterator[StreamEvent]:
         cal = self.calibration
         assert cal is not None
-        topics = [
-            self.depth_topic,
-            self.thermal_topic,
-            *([self.vox_topic] if self.vox_topic else []),
-        ]
+        ir_topic = self.ir_topic if self.with_ir else None
+        topics = [self.depth_topic, self.thermal_topic, self.vox_topic, ir_topic]
         conns = [c for c in self.reader.connections if c.topic in topics]
-        index = {self.depth_topic: 0, self.thermal_topic: 0}
+        index = {self.depth_topic: 0, self.thermal_topic: 0, ir_topic: 0}
         vox_c = math.nan
-        for conn, _, raw in self.reader.messages(connections=conns):
+        infrared: dict[int, Any] = {}  # stamp (ns) -> image, waiting for its depth frame
+        waiting: list[tuple[int, DepthFrame]] = []  # depth frames waiting for their image
+
+        def ready(now_ns: float) -> Iterator[StreamEvent]:
+            """The waiting depth frames whose image came, or that waited long enough."""
+            while waiting and (waiting[0][0] in infrared or now_ns - waiting[0][0] > IR_WAIT_NS):
+                ns, frame = waiting.pop(0)
+                frame = DepthFrame(frame.depth, frame.time_s, frame.index, infrared.pop(ns, None))
+                for older in [k for k in infrared if k < ns]:
+                    del infrared[older]
+                yield frame
+                yield from self.pairer.add_depth(frame)
+
+        for conn, bag_ns, raw in self.reader.messages(connections=conns):
             msg: Any = self.reader.deserialize(raw, conn.msgtype)
             if conn.topic == self.vox_topic:
                 vox_c = float(getattr(msg, "temperature", getattr(msg, "data", math.nan)))
@@ -235,14 +263,17 @@ class RosbagSource(Source):
             i = index[conn.topic]
             index[conn.topic] += 1
             where = f"{self.name}: {conn.topic} message {i}"
-            if conn.topic == self.depth_topic:
+            ns = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+            if conn.topic == ir_topic:
+                infrared[ns] = self._pixels(msg, where, IR_ENCODINGS, cal.depth)
+                yield from ready(bag_ns)
+            elif conn.topic == self.depth_topic:
                 depth = self._pixels(msg, where, DEPTH_ENCODINGS, cal.depth)
                 if depth.dtype != np.uint16:  # metres
                     mm = np.where(np.isfinite(depth) & (depth > 0), depth / DEPTH_UNIT_M, 0.0)
                     depth = np.clip(np.rint(mm), 0, 65535).astype(np.uint16)
-                frame = DepthFrame(depth, stamp_s(msg.header.stamp), i)
-                yield frame
-                yield from self.pairer.add_depth(frame)
+                waiting.append((ns, DepthFrame(depth, stamp_s(msg.header.stamp), i)))
+                yield from ready(bag_ns if ir_topic is not None else math.inf)
             else:
                 values = self._pixels(msg, where, THERMAL_ENCODINGS, cal.thermal)
                 kelvin = values.dtype != np.uint16
@@ -255,6 +286,7 @@ class RosbagSource(Source):
                 thermal = ThermalFrame(counts, stamp_s(msg.header.stamp), i, telemetry)
                 yield thermal
                 yield from self.pairer.add_thermal(thermal)
+        yield from ready(math.inf)
         yield from self.pairer.flush()
 
     @staticmethod
