@@ -302,12 +302,20 @@ def config_problems(config: MonitorConfig) -> list[str]:
     return problems
 
 
+def read_users(path: Path) -> dict[str, str]:
+    """The users and their passwords (a YAML mapping of names to passwords); InputError when
+    it is not one."""
+    users = read_mapping(path)
+    bad = [k for k, v in users.items() if not isinstance(v, str) or not v]
+    if bad:
+        raise InputError(f"{path}: {', '.join(map(repr, bad))}: give each user a password")
+    return {str(k): str(v) for k, v in users.items()}
+
+
 def _opcua_problems(opcua: OpcUaConfig | None) -> list[str]:
     """What is wrong with the OPC UA section: its endpoint, its users, who could connect."""
     if opcua is None:
         return []
-    from .opcua import read_users
-
     problems = []
     try:
         opcua.address()

@@ -49,8 +49,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError
 from ..pipeline import FusedFrame
-from ..schema import read_mapping
-from .config import OpcUaConfig
+from .config import OpcUaConfig, read_users
 from .homeassistant import RigEntities
 
 if TYPE_CHECKING:
@@ -59,16 +58,6 @@ if TYPE_CHECKING:
 INSTALL = "the monitor's OPC UA server needs the opcua extra: pip install 'thermodepth[opcua]'"
 SEVERITY = {"alarm": 800, "escalated": 800, "acknowledged": 300, "clear": 100}
 STATS = ("Max", "Mean", "Min")
-
-
-def read_users(path: Path) -> dict[str, str]:
-    """The users and their passwords (a YAML mapping of names to passwords); InputError when
-    it is not one."""
-    users = read_mapping(path)
-    bad = [k for k, v in users.items() if not isinstance(v, str) or not v]
-    if bad:
-        raise InputError(f"{path}: {', '.join(map(repr, bad))}: give each user a password")
-    return {str(k): str(v) for k, v in users.items()}
 
 
 class OpcUaServer:
