@@ -6,6 +6,7 @@ camera_info, a size that disagrees: one line."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -202,6 +203,24 @@ def test_an_export_read_by_foxglove_s_reader_and_by_rosbags(tmp_path: Path) -> N
     assert counts == {"/tf_static": 1, **{t: N for t in per_frame}, FUSED["alarms"]: 1}
     with AnyReader([out]) as reader:
         assert {c.topic: c.msgcount for c in reader.connections} == counts
+    # the layout in the docs names these topics, and colours the cloud by one of its fields
+    # with the settings Foxglove's 3D panel knows (colormap: turbo or rainbow, a min and max)
+    layout = json.loads((Path(__file__).parents[1] / "examples/foxglove-layout.json").read_text())
+    panels = layout["configById"]
+    image, raw = panels["Image!thermodepth"], panels["RawMessages!thermodepth"]
+    named = {
+        *panels["3D!thermodepth"]["topics"],
+        image["imageMode"]["imageTopic"],
+        raw["topicPath"],
+    }
+    assert named <= set(counts)
+    cloud_look = panels["3D!thermodepth"]["topics"][FUSED["cloud"]]
+    assert cloud_look["colorMode"] == "colormap" and cloud_look["colorMap"] in ("turbo", "rainbow")
+    assert (
+        cloud_look["colorField"] == "temperature"
+        and cloud_look["minValue"] < cloud_look["maxValue"]
+    )
+    assert panels["3D!thermodepth"]["followTf"] == "thermodepth_depth_optical_frame"
     cal = fused[0].calibration
     k = infos[TOPICS["thermal_info"]].k
     assert (k[0], k[2], k[4], k[5]) == (
