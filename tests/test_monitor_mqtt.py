@@ -205,8 +205,8 @@ def test_home_assistant_discovery(
     settings_file(tmp_path, FLAPPING + ROIS)
     discovery = Collector(broker, "homeassistant/#", client_id="ha")
     states = Collector(broker, "plant/#", client_id="states")
-    rigs = [{"name": "a", "source": "sim", "location": "Hall 2"},
-            {"name": "b", "source": "sim:thermal=lepton3.5"}]  # fmt: skip
+    rigs = [{"name": "a", "source": "sim:pace=real", "location": "Hall 2"},
+            {"name": "b", "source": "sim:pace=real,thermal=lepton3.5"}]  # fmt: skip
     path = monitor_config(tmp_path, [{**r, "settings": "s.yaml"} for r in rigs],
                           http={"listen": None},
                           mqtt={"url": broker.url("plant"), "homeassistant": True})  # fmt: skip
