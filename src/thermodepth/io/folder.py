@@ -187,15 +187,17 @@ def _check_size(image: NDArray[np.generic], shape: tuple[int, int], path: Path, 
         )
 
 
-def telemetry_of(row: Row, index: int, float_kelvin: bool) -> Telemetry:
-    """What a row tells of its thermal frame: the FPA temperature (NaN without one), the
-    shutter, and a float-kelvin image's output."""
-    nan = math.nan
+def telemetry_of(
+    index: int, fpa_temp_c: float | None, in_ffc: bool, float_kelvin: bool
+) -> Telemetry:
+    """What an image source tells of a thermal frame (a folder's row, a bag's messages):
+    its number, the FPA temperature (C; None or NaN: not told), the shutter, and a
+    float-kelvin image's output (held at :data:`FLOAT_KELVIN`)."""
     return Telemetry(
         frame_counter=index,
-        fpa_temp_k=nan if row.fpa_temp_c is None else row.fpa_temp_c + ZERO_C_IN_K,
-        housing_temp_k=nan,
-        ffc_state=FfcState.IN_PROGRESS if row.in_ffc else FfcState.COMPLETE,
+        fpa_temp_k=math.nan if fpa_temp_c is None else fpa_temp_c + ZERO_C_IN_K,
+        housing_temp_k=math.nan,
+        ffc_state=FfcState.IN_PROGRESS if in_ffc else FfcState.COMPLETE,
         tlinear=float_kelvin,
         tlinear_resolution_k=FLOAT_KELVIN.scale_k if float_kelvin else None,
     )

@@ -22,6 +22,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from ..calibration import Calibration
 from ..camera import Intrinsics, RigidTransform
@@ -51,6 +52,11 @@ def typestore(ros1: bool = False) -> Any:
 
 
 # -- reading ------------------------------------------------------------------------------------
+
+
+def stamp_ns(stamp: Any) -> int:
+    """A ROS time (``sec``, ``nanosec``) in nanoseconds (exact: a key to match stamps by)."""
+    return int(stamp.sec) * 10**9 + int(stamp.nanosec)
 
 
 def stamp_s(stamp: Any) -> float:
@@ -90,22 +96,14 @@ def intrinsics_of(info: Any, where: str) -> Intrinsics:
 
 
 def quaternion_matrix(x: float, y: float, z: float, w: float) -> NDArray[np.float64]:
-    """The rotation of a unit quaternion (normalised first)."""
-    q = np.array([x, y, z, w], dtype=float)
-    x, y, z, w = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])  # fmt: skip
+    """The rotation of a quaternion (normalised first; scipy's scalar-last order, as ROS's)."""
+    return np.asarray(Rotation.from_quat([x, y, z, w]).as_matrix())
 
 
 def matrix_quaternion(r: NDArray[np.float64]) -> tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation matrix (w >= 0)."""
-    from scipy.spatial.transform import Rotation
-
-    x, y, z, w = Rotation.from_matrix(r).as_quat()
-    return (x, y, z, w) if w >= 0 else (-x, -y, -z, -w)
+    x, y, z, w = Rotation.from_matrix(r).as_quat(canonical=True)
+    return float(x), float(y), float(z), float(w)
 
 
 def static_transforms(messages: Iterable[Any]) -> list[RigidTransform]:

@@ -84,7 +84,7 @@ class FolderSource(Source):
             return None
         t_depth = float(index) if row.depth_time_s is None else row.depth_time_s
         t_thermal = float(index) if row.thermal_time_s is None else row.thermal_time_s
-        telemetry = telemetry_of(row, index, float_kelvin)
+        telemetry = telemetry_of(index, row.fpa_temp_c, row.in_ffc, float_kelvin)
         thermal = ThermalFrame(values, t_thermal, index, telemetry)
         return DepthFrame(depth, t_depth, index, ir), thermal
 

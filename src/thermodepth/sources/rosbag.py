@@ -38,8 +38,8 @@ import numpy as np
 from ..calibration import Calibration
 from ..camera import Intrinsics, RigidTransform
 from ..errors import FieldError, InputError
-from ..frames import DepthFrame, FfcState, StreamEvent, Telemetry, ThermalFrame
-from ..io.folder import FLOAT_KELVIN, kelvin_values
+from ..frames import DepthFrame, StreamEvent, ThermalFrame
+from ..io.folder import kelvin_values, telemetry_of
 from ..io.ros import (
     CAMERA_INFO,
     DEPTH_ENCODINGS,
@@ -49,12 +49,13 @@ from ..io.ros import (
     THERMAL_ENCODINGS,
     image_array,
     intrinsics_of,
+    stamp_ns,
     stamp_s,
     static_transforms,
     transform_between,
     typestore,
 )
-from ..radiometry import RAW_COUNTS, ZERO_C_IN_K
+from ..radiometry import RAW_COUNTS
 from .base import Source
 from .pairing import DEFAULT_MAX_SKEW_S, StreamPairer
 
@@ -263,7 +264,7 @@ class RosbagSource(Source):
             i = index[conn.topic]
             index[conn.topic] += 1
             where = f"{self.name}: {conn.topic} message {i}"
-            ns = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+            ns = stamp_ns(msg.header.stamp)
             if conn.topic == ir_topic:
                 infrared[ns] = self._pixels(msg, where, IR_ENCODINGS, cal.depth)
                 yield from ready(bag_ns)
@@ -277,11 +278,7 @@ class RosbagSource(Source):
             else:
                 values = self._pixels(msg, where, THERMAL_ENCODINGS, cal.thermal)
                 kelvin = values.dtype != np.uint16
-                telemetry = Telemetry(
-                    frame_counter=i, fpa_temp_k=vox_c + ZERO_C_IN_K, housing_temp_k=math.nan,
-                    ffc_state=FfcState.COMPLETE, tlinear=kelvin,
-                    tlinear_resolution_k=FLOAT_KELVIN.scale_k if kelvin else None,
-                )  # fmt: skip
+                telemetry = telemetry_of(i, vox_c, False, kelvin)
                 counts = kelvin_values(values) if kelvin else values
                 thermal = ThermalFrame(counts, stamp_s(msg.header.stamp), i, telemetry)
                 yield thermal
