@@ -393,12 +393,17 @@ class FusedFrame:
         z[self.depth == 0] = np.nan
         return z
 
+    @cached_property
+    def with_temperature(self) -> NDArray[np.intp]:
+        """The flat indices (raster order) of the depth pixels that have a temperature."""
+        return np.flatnonzero(self.reason_depth == Reason.OK)
+
     def points(self, every: int = 1) -> tuple[NDArray[np.float64], FloatArray]:
         """3D points (N, 3) in the depth camera's frame (m) of the depth pixels that have a
         temperature (every ``every``-th of them, in raster order), and their temperatures
         (N,) in C. Each is its pixel's cached ray (:func:`~thermodepth.camera.pixel_rays`)
         times its depth, as ``deproject`` gives it."""
-        kept = np.flatnonzero(self.reason_depth == Reason.OK)[::every]
+        kept = self.with_temperature[::every]
         x, y = pixel_rays(self.calibration.depth)
         z = self.depth_m.ravel()[kept]
         pts = np.stack([x.ravel()[kept] * z, y.ravel()[kept] * z, z], axis=-1)

@@ -168,9 +168,11 @@ options, the settings and where warnings go."""
 def foxglove_sink(address: str) -> Sink:
     """The run as ROS messages to a live Foxglove server on ``address``."""
     from ..sinks.bag import BagSink
-    from ..sinks.foxglove import FoxgloveWriter
+    from ..sinks.foxglove import MAX_HZ, FoxgloveWriter
 
-    return BagSink(None, cloud_points=50_000, open_writer=lambda: FoxgloveWriter(address))
+    return BagSink(
+        None, cloud_points=50_000, open_writer=lambda: FoxgloveWriter(address), max_hz=MAX_HZ
+    )
 
 
 def provenance(settings_path: Path | None, settings: Settings) -> dict[str, Any]:

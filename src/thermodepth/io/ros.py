@@ -219,10 +219,7 @@ class MessageWriter(Protocol):
 
 class MessageOutput(MessageWriter, Protocol):
     """Where ROS messages go: a bag (:class:`BagWriter`) or a live Foxglove server
-    (:class:`~thermodepth.sinks.foxglove.FoxgloveWriter`, ``live``: clients come and go,
-    so latched topics are sent again)."""
-
-    live: bool
+    (:class:`~thermodepth.sinks.foxglove.FoxgloveWriter`)."""
 
     def close(self) -> None: ...
 
@@ -254,7 +251,6 @@ class BagWriter:
         if self.path.exists():
             raise InputError(f"{self.path}: exists already; give a new path")
         self.store = typestore(ros1=fmt == "ros1")
-        self.live = False
         self._topics: dict[str, Any] = {}
         self._bag: Any = None
         if fmt == "mcap":

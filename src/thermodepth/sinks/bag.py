@@ -24,6 +24,7 @@ import json
 import math
 import queue
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -36,7 +37,6 @@ from ..frames import Match, StreamEvent
 from ..io.measurements import jsonable
 from ..io.ros import FRAMES, IMAGE, BagWriter, MessageOutput, header_msg, image_msg, write_rig
 from ..pipeline import FusedFrame
-from ..registration import Reason
 from .base import BaseSink, RunContext, SessionResult
 from .mqtt import alarm_message, measurement_message
 
@@ -150,7 +150,10 @@ class QueuedWriter:
 class BagSink(BaseSink):
     """A session as ROS messages (module docstring) into a new bag at ``path`` (``fmt`` and
     ``compression`` as :class:`~thermodepth.io.ros.BagWriter`), or to what ``open_writer()``
-    opens (a live server); ``cloud_points``: the most points a cloud keeps."""
+    opens (a live server); ``cloud_points``: the most points a cloud keeps; ``max_hz``: a
+    live server's, at most so many pairs and fused frames a second (the others are not
+    built at all) and ``/tf_static`` each second for the clients that come later (None:
+    everything, ``/tf_static`` once)."""
 
     def __init__(
         self,
@@ -159,10 +162,12 @@ class BagSink(BaseSink):
         compression: str = "none",
         cloud_points: int = 100_000,
         open_writer: Callable[[], MessageOutput] | None = None,
+        max_hz: float | None = None,
     ) -> None:
         self.path = None if path is None else Path(path)
         self.fmt, self.compression, self.cloud_points = fmt, compression, cloud_points
-        self.open_writer = open_writer
+        self.open_writer, self.max_hz = open_writer, max_hz
+        self._last = {"pair": -math.inf, "frame": -math.inf, "tf": -math.inf}
         self.writer: MessageOutput | None = None
         self.calibration: Calibration | None = None
         self.pairs = self.frames = 0
@@ -218,25 +223,39 @@ class BagSink(BaseSink):
     def _put(
         self, topic: str, msgtype: str, msg: Any, time_s: float, latched: bool = False
     ) -> None:
-        if self._failed is not None:
-            raise InputError(f"{self.path or 'Foxglove'}: cannot write ({self._failed})")
+        self._raise_failure()
         self._queue.put((topic, msgtype, msg, time_s, latched))
 
+    def _raise_failure(self) -> None:
+        if self._failed is not None:
+            raise InputError(f"{self.path or 'Foxglove'}: cannot write ({self._failed})")
+
+    def _due(self, what: str, every_s: float) -> bool:
+        """Whether ``what`` goes now, ``every_s`` after it last went (wall clock)."""
+        now = time.monotonic()
+        if now - self._last[what] < every_s:
+            return False
+        self._last[what] = now
+        return True
+
+    def _live_due(self, what: str) -> bool:
+        return self.max_hz is None or self._due(what, 1.0 / self.max_hz)
+
     def event(self, event: StreamEvent) -> None:
-        if isinstance(event, Match) and self.writer is not None:
+        if isinstance(event, Match) and self.writer is not None and self._live_due("pair"):
             assert self.calibration is not None
-            with_tf = self.pairs == 0 or self.writer.live  # a live client may come later
+            with_tf = self._due("tf", math.inf if self.max_hz is None else 1.0)
             write_rig(self._queued, self.calibration, event.pair, with_tf)
             self.pairs += 1
 
     def frame(self, fused: FusedFrame) -> None:
-        if self.writer is None:
+        if self.writer is None or not self._live_due("frame"):
             return
         s, t, depth_frame = self.writer.store, fused.thermal_time_s, FRAMES["depth"]
         temp = np.asarray(fused.temp_depth_c, np.float32)
         self._put(TOPICS["temperature"], IMAGE, image_msg(s, temp, t, depth_frame), t)
-        valid = int(np.count_nonzero(fused.reason_depth == Reason.OK))
-        points, temps = fused.points(max(1, math.ceil(valid / self.cloud_points)))
+        every = max(1, math.ceil(len(fused.with_temperature) / self.cloud_points))
+        points, temps = fused.points(every)
         self._put(TOPICS["cloud"], CLOUD, cloud_msg(s, points, temps, t, depth_frame), t)
         self._put(TOPICS["markers"], MARKERS, markers_msg(s, fused, depth_frame), t)
         text = json.dumps(jsonable(measurement_message(fused)))
@@ -252,8 +271,7 @@ class BagSink(BaseSink):
         self._queue.put(None)
         self._thread.join()
         self._thread = None
-        if self._failed is not None:
-            raise InputError(f"{self.path or 'Foxglove'}: cannot write ({self._failed})")
+        self._raise_failure()
 
     def summary(self) -> str | None:
         where = self.path if self.path is not None else "Foxglove"

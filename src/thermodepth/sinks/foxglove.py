@@ -1,15 +1,15 @@
 """A run live in Foxglove (``run --foxglove [HOST:PORT]``; the ``foxglove`` extra:
 foxglove-sdk): the messages ``export`` writes (:mod:`.bag`), served by foxglove-sdk's
-WebSocket server as ROS 2 messages (``ros2msg`` schemas, CDR), each topic at most
-:data:`MAX_HZ` a second (``/tf_static`` once a second, so that a client that connects later
-has it), so that a live rig never waits for a viewer.
+WebSocket server as ROS 2 messages (``ros2msg`` schemas, CDR), at most :data:`MAX_HZ`
+pairs and fused frames a second, the others not even built (the sink's ``max_hz``), and
+``/tf_static`` once a second, so that a client that connects later has it: a live rig never
+waits for a viewer.
 
 Open Foxglove, "Open connection", Foxglove WebSocket, ``ws://HOST:PORT``.
 """
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 from ..errors import FieldError, InputError
@@ -31,15 +31,13 @@ def parse_address(text: str) -> tuple[str, int]:
 class FoxgloveWriter:
     """ROS messages to a Foxglove WebSocket server on ``address`` (module docstring)."""
 
-    def __init__(self, address: str = DEFAULT_ADDRESS, max_hz: float = MAX_HZ) -> None:
+    def __init__(self, address: str = DEFAULT_ADDRESS) -> None:
         try:
             import foxglove
         except ImportError:
             raise InputError(INSTALL) from None
         host, port = parse_address(address)
         self.store = typestore()
-        self.live = True
-        self.max_hz = max_hz
         try:
             self.server = foxglove.start_server(name="thermodepth", host=host, port=port)
         except Exception as exc:  # the SDK says why in its own error type
@@ -47,19 +45,13 @@ class FoxgloveWriter:
         self.port = int(self.server.port)
         self.url = f"ws://{host}:{self.port}"
         self._channels: dict[str, Any] = {}
-        self._last: dict[str, float] = {}
 
     def write(
         self, topic: str, msgtype: str, msg: Any, time_s: float, latched: bool = False
     ) -> None:
-        """One message, unless its topic had one less than 1/max_hz ago (wall clock)."""
+        """One message to the clients subscribed to ``topic``."""
         from foxglove import Channel, Schema
 
-        now = time.monotonic()
-        every_s = 1.0 if latched else 1.0 / self.max_hz
-        if now - self._last.get(topic, float("-inf")) < every_s:
-            return
-        self._last[topic] = now
         channel = self._channels.get(topic)
         if channel is None:
             text = self.store.generate_msgdef(msgtype, ros_version=2)[0]
