@@ -32,3 +32,12 @@ def chromium(width: int = 1280, height: int = 900) -> Any:
                 f"--window-size={width},{height}", "--hide-scrollbars"):  # fmt: skip
         options.add_argument(arg)
     return webdriver.Chrome(options=options, service=Service(executable_path=CHROMEDRIVER))
+
+
+def fill_login(driver: Any, token: str, name: str = "operator jane") -> None:
+    """Log in on the dashboard's login page the browser shows: the name and the token."""
+    from selenium.webdriver.common.by import By
+
+    driver.find_element(By.ID, "name").send_keys(name)
+    driver.find_element(By.ID, "token").send_keys(token)
+    driver.find_element(By.CSS_SELECTOR, "button[type=submit]").click()

@@ -76,13 +76,9 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Any:
 
 
 def log_in(driver: Any, url: str, token: str) -> None:
-    from selenium.webdriver.common.by import By
-
     driver.get(f"{url}/")
     wait_for(lambda: "/login" in driver.current_url, 5)
-    driver.find_element(By.ID, "name").send_keys("operator jane")
-    driver.find_element(By.ID, "token").send_keys(token)
-    driver.find_element(By.CSS_SELECTOR, "button[type=submit]").click()
+    browser.fill_login(driver, token)
 
 
 def texts(driver: Any, selector: str, attribute: str | None = None) -> list[str]:

@@ -230,9 +230,7 @@ def test_the_central_dashboards_pages_in_a_browser(plant: Any) -> None:
     driver = browser.chromium()
     try:
         driver.get(f"{server.url}/login")
-        driver.find_element(By.ID, "name").send_keys("operator jane")
-        driver.find_element(By.ID, "token").send_keys("s3cret")
-        driver.find_element(By.CSS_SELECTOR, "button[type=submit]").click()
+        browser.fill_login(driver, "s3cret")
         script = "return [...document.querySelectorAll('section.card')].map((c) => c.dataset.rig)"
         assert wait_for(lambda: driver.execute_script(script) == ["edge1/a", "edge2/b"], 10)
         loaded = (
