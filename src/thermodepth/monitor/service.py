@@ -568,11 +568,11 @@ class Monitor:
         caller); None when it has none or it is not kept. Found by the event's id, never a
         path from outside: a clip id that leads out of the clips' folder is none."""
         event = self.store.event(event_id)
-        if event is None or not event.get("clip") or not event.get("clip_kept", True):
+        if event is None or what not in self.evidence_of(event):
             return None
         root = (self.config.storage.path / CLIPS).resolve()
         folder = (root / str(event["clip"])).resolve()
-        if not folder.is_relative_to(root) or folder == root or what not in EVIDENCE_FILES:
+        if not folder.is_relative_to(root) or folder == root:
             return None
         path = folder / EVIDENCE_FILES[what]
         return path if path.exists() else None
