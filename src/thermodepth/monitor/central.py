@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import __version__
+from ..alarms import RAISED
 from ..pipeline import MqttSettings
 from ..sinks.mqtt import MqttConnection, MqttTarget, default_client_id
 from .config import MONITOR
@@ -56,7 +57,6 @@ SILENT_S = 2.5 * STATUS_EVERY_S
 ACK_WAIT_S = 5.0
 EVENT_WINS_S = 2.0  # an event newer than this outranks a status published before it
 LEAVES = ("status", "measurements", "alarms", "ack/result", *(f"snapshot/{k}" for k in SNAPSHOTS))
-RAISING = ("alarm", "escalated")
 
 
 @dataclass
@@ -227,7 +227,7 @@ class CentralDashboard:
         with self._lock:
             self.event_counts[rig, kind] += 1
             r.changed_s[rule] = time.monotonic()
-            if kind in RAISING:
+            if kind in RAISED:
                 r.active[rule] = {"rule": rule, "level": copy["level"]}
                 if copy.get("fault"):
                     r.active[rule]["fault"] = copy["fault"]
@@ -239,9 +239,9 @@ class CentralDashboard:
             elif kind == "clear":
                 r.active.pop(rule, None)
             overlay = r.pictures.get("overlay.jpg")
-            if kind in RAISING and overlay is None:
+            if kind in RAISED and overlay is None:
                 r.unpictured.append(event_id)  # the rig's first overlay will be its snapshot
-        if kind in RAISING and overlay is not None:
+        if kind in RAISED and overlay is not None:
             self._keep_snapshot(event_id, overlay)
 
     def _keep_snapshot(self, event_id: int, jpeg: bytes) -> None:
