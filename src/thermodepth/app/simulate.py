@@ -1,5 +1,5 @@
-"""``thermodepth simulate``: the paper's sweep, frame pairs with ground truth, and board
-captures, on the simulated rig."""
+"""``thermodepth simulate``: the paper's sweep, frame pairs with ground truth, board
+captures and sessions, the paper's protocol and walks round a scene, on the simulated rig."""
 
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ from ..sim.protocols import (
     write_frames,
 )
 from ..sim.scene import BOARD_STYLES
+from ..sim.walkaround import WALK_SITES, WalkConfig, simulate_walkaround, walkaround_steps
 from ..sweep import SweepTable, write_sweep_csv
 
 
@@ -97,6 +98,29 @@ def board_session(
             out, spec, poses, seed, style, hold_s, move_s, progress=advance, camera=camera,
             depth=depth,
         )  # fmt: skip
+
+
+def walkaround(
+    out: Path,
+    scene: str = "machine",
+    duration_s: float | None = None,
+    seed: int = 0,
+    reporter: Reporter = SILENT,
+    camera: str | None = None,
+    depth: str | None = None,
+) -> Path:
+    """A recording of a walk round a scene with the rig in hand, with its truth, for
+    ``thermodepth map`` (:func:`~thermodepth.sim.walkaround.simulate_walkaround`), of the
+    simulated cameras ``camera`` and ``depth`` (None: the Lepton 3, 1280x720)."""
+    if scene not in WALK_SITES:
+        raise FieldError("scene", f"unknown {scene!r}; choose from {', '.join(WALK_SITES)}")
+    if duration_s is not None:
+        _check_seconds(duration_s=duration_s)
+    check_cameras(camera, depth)
+    check_output(out)
+    config = WalkConfig.of(scene, duration_s, seed, camera, depth)
+    with reporter.task(f"walk round the {scene}", walkaround_steps(config)) as advance:
+        return simulate_walkaround(out, progress=advance, config=config)
 
 
 def protocol(out: Path, config: ProtocolConfig, reporter: Reporter = SILENT) -> Path:

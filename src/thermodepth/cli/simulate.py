@@ -1,4 +1,5 @@
-"""``simulate sweep|frames|targets|board-session|protocol`` and ``demo``: the simulated rig."""
+"""``simulate sweep|frames|targets|board-session|protocol|walkaround`` and ``demo``: the
+simulated rig."""
 
 from __future__ import annotations
 
@@ -186,6 +187,40 @@ def simulate_protocol_cmd(
     )
     path = protocol(out, config, BARS)
     console.print(f"wrote {path}: {config.pairs} pairs")
+
+
+@simulate_app.command("walkaround")
+@one_line_errors
+def simulate_walkaround_cmd(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Recording to create (.zarr).")],
+    scene: Annotated[
+        str,
+        typer.Option(
+            help="machine (a motor, hot bearings, pipes and a cabinet with a hot terminal, "
+            "walked round) or room (a room with a radiator and a window, seen from inside)."
+        ),
+    ] = "machine",
+    duration_s: Annotated[
+        float | None,
+        typer.Option(
+            "--duration-s",
+            "--duration",
+            help="The walk's length, s (default: 30 round the machine, 40 round the room; a "
+            "shorter walk goes part of the way out and back).",
+        ),
+    ] = None,
+    seed: Seed = 0,
+    thermal_camera: ThermalCamera = None,
+    depth_mode: DepthMode = None,
+) -> None:
+    """A recording of a walk round a scene with the rig in hand, for `thermodepth map`:
+    every depth frame (30 fps) and thermal frame (FFCs included), the pairs, and the truth
+    (scene, mesh, trajectory, hot spots, what each frame saw). The thermal image smears as
+    the rig moves; surfaces are directional and mirrors reflect."""
+    from ..app.simulate import walkaround
+
+    path = walkaround(out, scene, duration_s, seed, BARS, thermal_camera, depth_mode)
+    console.print(f"wrote {path}")
 
 
 @app.command("demo")

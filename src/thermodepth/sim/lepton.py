@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -37,9 +38,10 @@ from ..radiometry import (
     atmospheric_transmission,
     band_radiance,
     counts_from_kelvin,
+    fresnel_emissivity,
     kelvin_from_counts,
 )
-from .raycast import Hits
+from .raycast import Hits, cast_rays
 from .scene import Scene
 
 FloatArray = NDArray[np.float64]
@@ -161,54 +163,154 @@ def radiance_table(response: SpectralResponse = LWIR_8_14) -> RadianceTable:
     return RadianceTable(t, band_radiance(t, response))
 
 
-def aperture_radiance(scene: Scene, hits: Hits, table: RadianceTable) -> FloatArray:
+class SurfaceHits(Protocol):
+    """Where rays meet the scene: rect index (-1 = nothing) and local (s, q) on it, (...)
+    arrays (a camera's :class:`~.raycast.Hits`, or arbitrary rays'
+    :class:`~.raycast.RayHits`)."""
+
+    @property
+    def rect(self) -> NDArray[np.int64]: ...
+    @property
+    def s_m(self) -> FloatArray: ...
+    @property
+    def q_m(self) -> FloatArray: ...
+
+
+def aperture_radiance(
+    scene: Scene, hits: Hits, table: RadianceTable, eye_m: FloatArray | None = None
+) -> FloatArray:
     """In-band radiance (W m^-2 sr^-1) reaching the lens along each ray of ``hits``.
 
-    L_ap = tau(r) [eps L(T) + (1 - eps) L(T_amb)] + (1 - tau(r)) L(T_amb); rays that hit
-    nothing see the enclosure at the ambient temperature.
+    L_ap = tau(r) [eps L(T) + (1 - eps) L_r] + (1 - tau(r)) L(T_amb); rays that hit nothing
+    see the enclosure at the ambient temperature. L_r, the radiance the surface reflects, is
+    the ambient's L(T_amb), unless its material is specular: then the radiance its mirrored
+    ray meets, one bounce (the surface there at its temperature and emissivity, reflecting
+    the ambient, through the air between; the ambient if it meets nothing). eps is the
+    material's, or for a directional one its Fresnel emissivity at the angle of view
+    (:func:`~thermodepth.radiometry.fresnel_emissivity`). ``eye_m`` (3,): the camera's
+    centre in the world, needed when the scene has directional or specular materials.
     """
-    temp, emis = surface_properties(scene, hits)[:2]
+    if scene.has_optics and eye_m is None:
+        raise ValueError("a scene with directional or specular materials needs the eye_m")
+    return _radiance(scene, hits, hits.range_m, table, eye_m=eye_m)
+
+
+def _radiance(
+    scene: Scene,
+    hits: SurfaceHits,
+    range_m: FloatArray,
+    table: RadianceTable,
+    eye_m: FloatArray | None = None,
+    directions: FloatArray | None = None,
+) -> FloatArray:
+    """In-band radiance along rays that meet the scene at ``hits`` after ``range_m`` of air:
+    rays from the eye ``eye_m`` (3,), whose specular surfaces reflect what their mirrored
+    rays meet, or rays of unit ``directions`` (..., 3) (mirrored ones: what they meet
+    reflects the ambient)."""
+    temp = _per_ray(scene, hits, "temp_k", scene.ambient_temp_k)
+    emis = _per_ray(scene, hits, "emissivity", 1.0)
     l_amb = float(table.to_radiance(scene.ambient_temp_k))
     l_obj = table.to_radiance(temp)
+    l_refl = np.full(emis.shape, l_amb)
+    if scene.has_optics:
+        _view_optics(scene, hits, range_m, table, emis, l_refl, eye_m, directions)
     tau = atmospheric_transmission(
-        np.where(hits.rect >= 0, hits.range_m, 0.0), scene.ambient_temp_k, scene.relative_humidity
+        np.where(hits.rect >= 0, range_m, 0.0), scene.ambient_temp_k, scene.relative_humidity
     )
-    return tau * (emis * l_obj + (1.0 - emis) * l_amb) + (1.0 - tau) * l_amb
+    return tau * (emis * l_obj + (1.0 - emis) * l_refl) + (1.0 - tau) * l_amb
 
 
-def surface_properties(scene: Scene, hits: Hits) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _view_optics(
+    scene: Scene,
+    hits: SurfaceHits,
+    range_m: FloatArray,
+    table: RadianceTable,
+    emis: FloatArray,
+    l_refl: FloatArray,
+    eye_m: FloatArray | None,
+    directions: FloatArray | None,
+) -> None:
+    """Set, in place, the emissivity of rays that meet a directional material to its
+    Fresnel value at the angle of view, and, for rays from the eye, the reflected radiance
+    of those that meet a specular one to what the mirrored ray meets (one bounce)."""
+    g = scene.geometry
+    rect, dist = hits.rect.ravel(), range_m.ravel()
+    turn = np.flatnonzero(_per_ray(scene, hits, "directional", 0.0).ravel() > 0)
+    if eye_m is not None:
+        # a ray from the eye meets a plane D from the eye at cos(theta) = D / range
+        plane_m = np.abs(np.einsum("ij,ij->i", g.normal, g.center_m - eye_m))
+        cos = plane_m[rect[turn]] / dist[turn]
+    else:
+        assert directions is not None
+        cos = np.einsum("ij,ij->i", directions.reshape(-1, 3)[turn], g.normal[rect[turn]])
+    emis.ravel()[turn] = fresnel_emissivity(cos, emis.ravel()[turn])
+    mirror = np.flatnonzero(_per_ray(scene, hits, "specular", 0.0).ravel() > 0)
+    if eye_m is None or not mirror.size:
+        return
+    on = rect[mirror]
+    points = g.points_m(on, hits.s_m.ravel()[mirror], hits.q_m.ravel()[mirror])
+    view = points - eye_m
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    normal = g.normal[on]
+    out = view - 2.0 * np.einsum("ij,ij->i", view, normal)[:, None] * normal
+    seen = cast_rays(scene, points, out, skip=on)  # never meets the mirror again
+    l_refl.ravel()[mirror] = _radiance(scene, seen, seen.t, table, directions=out)
+
+
+def surface_properties(
+    scene: Scene, hits: SurfaceHits
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Temperature (K), emissivity and near-IR albedo along each ray (pattern-aware).
 
     Rays that hit nothing get the ambient temperature, emissivity 1 and albedo 0.
     """
-    temp = [r.material.temp_k for r in scene.rects] + [scene.ambient_temp_k]
-    emis = [r.material.emissivity for r in scene.rects] + [1.0]
-    albedo = [r.material.ir_albedo for r in scene.rects] + [0.0]
     return (
-        _per_ray(scene, hits, temp, "temp_k"),
-        _per_ray(scene, hits, emis, "emissivity"),
-        _per_ray(scene, hits, albedo, "ir_albedo"),
+        _per_ray(scene, hits, "temp_k", scene.ambient_temp_k),
+        _per_ray(scene, hits, "emissivity", 1.0),
+        _per_ray(scene, hits, "ir_albedo", 0.0),
     )
 
 
 def near_ir_albedo(scene: Scene, hits: Hits) -> FloatArray:
     """The near-IR albedo along each ray (what the depth camera's IR image needs; 0 where
     nothing is hit): :func:`surface_properties`' third, alone."""
-    return _per_ray(scene, hits, [r.material.ir_albedo for r in scene.rects] + [0.0], "ir_albedo")
+    return _per_ray(scene, hits, "ir_albedo", 0.0)
 
 
-def _per_ray(scene: Scene, hits: Hits, values: list[float], name: str) -> FloatArray:
-    """One material property per ray: ``values`` per rect (then the value of no hit), the
-    second material's ``name`` where a rect's pattern puts it."""
+def _per_ray(scene: Scene, hits: SurfaceHits, name: str, missed: float) -> FloatArray:
+    """One material property ``name`` (a :class:`Material` field) per ray, ``missed`` where
+    nothing is hit, the second material's where a rect's pattern puts it."""
     n = len(scene.rects)
-    out = np.asarray(values)[np.where(hits.rect >= 0, hits.rect, n)]
+    values = [float(getattr(r.material, name)) for r in scene.rects]
+    out = np.asarray([*values, missed])[np.where(hits.rect >= 0, hits.rect, n)]
     for i, rect in enumerate(scene.rects):
         if rect.pattern is None or rect.material_b is None:
             continue
         on = np.flatnonzero(hits.rect.ravel() == i)
         second = rect.pattern.second_material(hits.s_m.ravel()[on], hits.q_m.ravel()[on])
-        out.ravel()[on[second]] = getattr(rect.material_b, name)
+        out.ravel()[on[second]] = float(getattr(rect.material_b, name))
     return out
+
+
+def bolometer_memory(time_constant_s: float, renders: int = 4) -> tuple[FloatArray, FloatArray]:
+    """Lags (s, (renders,)) before a frame's time and weights ((renders,), sum 1) that stand
+    for a microbolometer's memory of the scene in a few renders.
+
+    A pixel is a first-order thermal system: its signal is the scene radiance filtered by
+    (1 / tau) exp(-s / tau), s >= 0 the lag (the Lepton's tau: about 12 ms, an assumption;
+    FLIR gives 8-12 ms for modern microbolometers and no figure for the Lepton). The kernel
+    is split into ``renders`` intervals one tau long (the last one open-ended), each rendered
+    at its centroid with its share of the weight, so the mean and the mean lag (tau) are
+    exact: lags (k + 0.418) tau with weights (1 - 1/e) e^-k, and the last at renders x tau
+    with e^-(renders - 1). Four renders reach past 3 tau (95 % of the weight).
+    """
+    k = np.arange(renders, dtype=np.float64)
+    e = np.exp(-1.0)
+    weights = np.exp(-k) * (1.0 - e)
+    lags = (k + 1.0 - e / (1.0 - e)) * time_constant_s
+    weights[-1] = np.exp(-(renders - 1.0))
+    lags[-1] = renders * time_constant_s
+    return lags, weights
 
 
 def footprint_and_blur(

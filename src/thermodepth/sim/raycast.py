@@ -1,4 +1,5 @@
-"""Ray casting of rect scenes for a pinhole camera with distortion (numba kernels).
+"""Ray casting of rect scenes for a pinhole camera with distortion, and of arbitrary rays
+(numba kernels).
 
 A camera's rays are given as a grid of undistorted normalised coordinates (x, y): the ray
 through a (sub)pixel is d = (x, y, 1) in the camera frame, so the hit parameter t is the depth
@@ -15,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import Intrinsics, RigidTransform, pixel_rays
-from .scene import Rect, Scene
+from .scene import Scene
 
 FloatArray = NDArray[np.float64]
 
@@ -91,33 +92,74 @@ def _blocked(points, prims, tol, out):  # pragma: no cover - JIT
         out[i] = hit
 
 
-def rect_params(rects: tuple[Rect, ...], camera_from_world: RigidTransform) -> FloatArray:
-    """Kernel parameters (P, 14) of rects expressed in the camera frame."""
-    out = np.empty((len(rects), _N_PARAMS))
-    rot = camera_from_world.rotation
-    for i, r in enumerate(rects):
-        c = camera_from_world.apply(r.center_m)
-        n, u, v = rot @ r.normal, rot @ r.axis_u, rot @ r.axis_v
+@numba.njit(parallel=True, cache=True)
+def _cast_rays(origins, dirs, skip, prims, t_out, id_out, s_out, q_out):  # pragma: no cover
+    # the nearest rect along each ray o + t d (t > 0), all rects tested: rays go anywhere
+    for i in numba.prange(origins.shape[0]):
+        ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
+        dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+        best = np.inf
+        best_p = -1
+        best_s = np.nan
+        best_q = np.nan
+        for p in range(prims.shape[0]):
+            if p == skip[i]:
+                continue
+            nd = prims[p, 0] * dx + prims[p, 1] * dy + prims[p, 2] * dz
+            if nd == 0.0:
+                continue
+            t = (prims[p, 3] - (prims[p, 0] * ox + prims[p, 1] * oy + prims[p, 2] * oz)) / nd
+            if t <= 1e-9 or t >= best:
+                continue
+            x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
+            s = prims[p, 4] * x + prims[p, 5] * y + prims[p, 6] * z - prims[p, 7]
+            if abs(s) > prims[p, 12]:
+                continue
+            q = prims[p, 8] * x + prims[p, 9] * y + prims[p, 10] * z - prims[p, 11]
+            if abs(q) > prims[p, 13]:
+                continue
+            best, best_p, best_s, best_q = t, p, s, q
+        t_out[i] = best
+        id_out[i] = best_p
+        s_out[i] = best_s
+        q_out[i] = best_q
+
+
+def rect_params(scene: Scene, camera_from_world: RigidTransform) -> FloatArray:
+    """Kernel parameters (R, 14) of the scene's rects expressed in the camera frame."""
+    out = np.empty((len(scene.rects), _N_PARAMS))
+    rot, t = camera_from_world.rotation, camera_from_world.translation_m
+    normals = scene.geometry.normal
+    # one rect at a time: products of whole arrays would round a last bit differently
+    for i, r in enumerate(scene.rects):
+        c = r.center_m @ rot.T + t
+        n, u, v = rot @ normals[i], rot @ r.axis_u, rot @ r.axis_v
         out[i] = [*n, n @ c, *u, u @ c, *v, v @ c, r.half_u_m, r.half_v_m]
     return out
 
 
-def _bbox(rect: Rect, camera_from_world: RigidTransform, intr: Intrinsics, ss: int) -> list[int]:
-    """Inclusive (row0, row1, col0, col1) of the rect in the supersampled grid."""
+def _bboxes(
+    scene: Scene, camera_from_world: RigidTransform, intr: Intrinsics, ss: int
+) -> NDArray[np.int64]:
+    """Inclusive (row0, row1, col0, col1) of each rect in the supersampled grid, (R, 4):
+    the bounds of its projected outline plus a margin; the whole grid where the outline
+    reaches behind the camera or beyond the lens' valid radius, nothing where it is wholly
+    behind."""
     h, w = intr.height * ss, intr.width * ss
-    pts = camera_from_world.apply(rect.boundary_m())
-    if np.all(pts[:, 2] <= 0):
-        return [1, 0, 1, 0]  # wholly behind the camera: empty
-    if np.any(pts[:, 2] <= 1e-6):
-        return [0, h - 1, 0, w - 1]
+    pts = camera_from_world.apply(scene.outlines_m)  # (R, P, 3)
+    z = pts[..., 2]
     px = intr.project(pts)
-    if np.any(np.isnan(px)):
-        return [0, h - 1, 0, w - 1]  # outline beyond the lens' valid radius: test everything
-    g = (px + 0.5) * ss - 0.5
+    g = (np.nan_to_num(px) + 0.5) * ss - 0.5
     margin = 2 * ss
-    c0, r0 = np.floor(g.min(axis=0)).astype(int) - margin
-    c1, r1 = np.ceil(g.max(axis=0)).astype(int) + margin
-    return [max(r0, 0), min(r1, h - 1), max(c0, 0), min(c1, w - 1)]
+    c0, r0 = (np.floor(g.min(axis=1)).astype(np.int64) - margin).T
+    c1, r1 = (np.ceil(g.max(axis=1)).astype(np.int64) + margin).T
+    out = np.stack(
+        [np.maximum(r0, 0), np.minimum(r1, h - 1), np.maximum(c0, 0), np.minimum(c1, w - 1)],
+        axis=1,
+    )
+    out[np.any(z <= 1e-6, axis=1) | np.any(np.isnan(px), axis=(1, 2))] = [0, h - 1, 0, w - 1]
+    out[np.all(z <= 0, axis=1)] = [1, 0, 1, 0]  # empty
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,22 +182,70 @@ def cast(
 ) -> Hits:
     """Cast one ray per (sub)pixel of a camera into the scene; arrays (H*ss, W*ss)."""
     xs, ys = pixel_rays(intr, supersample)
-    prims = rect_params(scene.rects, camera_from_world)
-    bbox = np.array(
-        [_bbox(r, camera_from_world, intr, supersample) for r in scene.rects], dtype=np.int64
-    ).reshape(-1, 4)
+    prims = rect_params(scene, camera_from_world)
+    bbox = _bboxes(scene, camera_from_world, intr, supersample)
     z, s, q, rng = (np.empty(xs.shape) for _ in range(4))
     ids = np.empty(xs.shape, dtype=np.int64)
     _cast_grid(xs, ys, prims, bbox, z, ids, s, q, rng)
     return Hits(z, ids, s, q, rng)
 
 
+@dataclass(frozen=True, eq=False)
+class RayHits:
+    """What each of N rays hits: t, how far along the ray (in units of its direction's
+    length: metres for unit directions; inf = nothing), the rect index (-1 = nothing) and
+    the local (s, q) coordinates on it (m; NaN = nothing); arrays (N,)."""
+
+    t: FloatArray
+    rect: NDArray[np.int64]
+    s_m: FloatArray
+    q_m: FloatArray
+
+
+def cast_rays(
+    scene: Scene,
+    origins_m: FloatArray,
+    directions: FloatArray,
+    frame_from_world: RigidTransform | None = None,
+    skip: NDArray[np.int64] | None = None,
+) -> RayHits:
+    """Cast arbitrary rays o + t d (origins (N, 3) m, directions (N, 3)) into the scene and
+    find the nearest rect each meets at t > 0.
+
+    The rays are given in the frame ``frame_from_world`` maps the world to (None: the world
+    frame); ``skip`` (N,): a rect index each ray ignores (-1: none), the surface a ray leaves
+    (a reflection). Every rect is tested (no culling): for a few rays, not an image grid
+    (:func:`cast`).
+    """
+    world = frame_from_world or RigidTransform.identity("world", "world")
+    prims = rect_params(scene, world)
+    o = np.ascontiguousarray(origins_m, dtype=np.float64).reshape(-1, 3)
+    d = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+    n = o.shape[0]
+    skip = np.full(n, -1, np.int64) if skip is None else np.ascontiguousarray(skip, np.int64)
+    t, s, q = np.empty(n), np.empty(n), np.empty(n)
+    ids = np.empty(n, dtype=np.int64)
+    _cast_rays(o, d, skip, prims, t, ids, s, q)
+    return RayHits(t, ids, s, q)
+
+
 def blocked(
-    scene: Scene, camera_from_world: RigidTransform, points_cam_m: FloatArray, tol: float = 1e-6
+    scene: Scene,
+    camera_from_world: RigidTransform,
+    points_cam_m: FloatArray,
+    tol: float = 1e-6,
+    in_image: Intrinsics | None = None,
 ) -> NDArray[np.bool_]:
     """True where the line of sight from the camera centre to each point (N, 3, camera
-    frame) is blocked by a rect before reaching it (relative tolerance ``tol``)."""
-    prims = rect_params(scene.rects, camera_from_world)
+    frame) is blocked by a rect before reaching it (relative tolerance ``tol``).
+
+    ``in_image``: the points all lie inside this camera's image, so only the rects that
+    reach into it are tested (a line of sight inside the image meets no other).
+    """
+    prims = rect_params(scene, camera_from_world)
+    if in_image is not None:
+        r0, r1, c0, c1 = _bboxes(scene, camera_from_world, in_image, 1).T
+        prims = np.ascontiguousarray(prims[(r0 <= r1) & (c0 <= c1)])
     pts = np.ascontiguousarray(points_cam_m, dtype=np.float64).reshape(-1, 3)
     out = np.empty(pts.shape[0], dtype=np.bool_)
     _blocked(pts, prims, tol, out)

@@ -1,11 +1,13 @@
 """The simulated rig: a virtual D435 and a virtual Lepton 3 on one bracket, in a scene.
 
-:class:`Rig` yields :class:`~thermodepth.frames.FramePair` like real cameras and recordings,
-and gives exact ground truth (:class:`GroundTruth`) for the same geometry.
+:class:`Rig` yields :class:`~thermodepth.frames.FramePair` like real cameras and recordings
+(or every frame of both cameras on their own clocks, :meth:`Rig.stream`), and gives exact
+ground truth (:class:`GroundTruth`) for the same geometry.
 """
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -16,7 +18,7 @@ from numpy.typing import NDArray
 
 from ..calibration import Calibration
 from ..camera import RigidTransform
-from ..frames import FramePair
+from ..frames import DepthFrame, FramePair, Match, StreamEvent, ThermalFrame, pair_of
 from .cameras import depth_mode, rig_calibration, thermal_camera
 from .d435 import DepthCameraModel, depth_units, ir_image, stereo_shadow
 from .lepton import (
@@ -24,6 +26,7 @@ from .lepton import (
     LeptonModel,
     LeptonSensor,
     aperture_radiance,
+    bolometer_memory,
     constant_fpa,
     footprint_and_blur,
     near_ir_albedo,
@@ -103,7 +106,10 @@ class Rig:
     randomness (noise, fixed pattern) follows from it; with_ir: also render the depth
     camera's infrared image; start_s: time of the first thermal frame; frame_interval_s: time
     between the thermal frames it gives (None: every frame, 1 / fps; longer: one frame in so
-    many, as a session that keeps a pair every few seconds).
+    many, as a session that keeps a pair every few seconds); thermal_time_constant_s: the
+    microbolometer's thermal time constant (None: it follows the scene at once): a moving
+    rig's thermal image is then the exponentially weighted mean of the scene over the time
+    constants before the frame (:func:`~.lepton.bolometer_memory`), smeared along the motion.
     Noise-free renders are cached per pose; frames differ by noise and the sensor's state.
     """
 
@@ -119,6 +125,7 @@ class Rig:
     depth_phase_s: float = 0.004
     trajectory: Trajectory | None = None
     frame_interval_s: float | None = None
+    thermal_time_constant_s: float | None = None
 
     @classmethod
     def of_cameras(
@@ -195,11 +202,29 @@ class Rig:
             ss = self.lepton.supersample
             thermal_from_world = self.calibration.thermal_from_depth @ pose.inverse()
             hits = cast(self.scene, thermal_from_world, self.calibration.thermal, ss)
-            sub = aperture_radiance(self.scene, hits, radiance_table(self.lepton.response))
+            eye_m = thermal_from_world.inverse().translation_m
+            table = radiance_table(self.lepton.response)
+            sub = aperture_radiance(self.scene, hits, table, eye_m)
             return footprint_and_blur(sub, ss, self.lepton.psf_sigma_px)
 
         aperture: FloatArray = self._cached(self._thermal_renders, pose, render)
         return aperture
+
+    def aperture_at(self, time_s: float) -> FloatArray:
+        """Noise-free aperture radiance the thermal sensor sees at ``time_s``, (h, w): the
+        render at that time's pose; with a thermal time constant and a rig that moved, the
+        weighted mean of renders at the poses of :func:`~.lepton.bolometer_memory`'s lags
+        before it (the image smears along the motion)."""
+        pose = self.pose_at(time_s)
+        tau = self.thermal_time_constant_s
+        if tau is None or self.trajectory is None:
+            return self._aperture(pose)
+        lags_s, weights = bolometer_memory(tau)
+        poses = [self.pose_at(time_s - lag) for lag in lags_s]
+        if all(_same_pose(p, pose) for p in poses):  # held: one render, as without memory
+            return self._aperture(pose)
+        renders = np.stack([self._aperture(p) for p in poses])
+        return np.asarray(np.einsum("k,khw->hw", weights, renders))
 
     def pose_at(self, time_s: float) -> RigidTransform:
         """``world_from_depth`` at ``time_s``: the trajectory's, else ``pose``."""
@@ -211,33 +236,114 @@ class Rig:
         at ``pose``."""
         return self._aperture(self.pose)
 
-    def frame(self) -> FramePair:
-        """The next frame pair: thermal frame k at start_s + k / fps (k frame_interval_s if
-        set), paired with the nearest
-        depth frame (30 fps, offset by depth_phase_s); each rendered at its own time's
-        pose."""
-        k = self._index
-        t_thermal = self.start_s + k * (self.frame_interval_s or 1.0 / self.lepton.fps)
-        j = round((t_thermal - self.depth_phase_s) * self.depth_model.fps)
-        t_depth = j / self.depth_model.fps + self.depth_phase_s
+    def thermal_time_s(self, index: int) -> float:
+        """Time of thermal frame ``index``: start_s + index / fps (index frame_interval_s if
+        set)."""
+        return self.start_s + index * (self.frame_interval_s or 1.0 / self.lepton.fps)
+
+    def depth_time_s(self, index: int) -> float:
+        """Time of depth frame ``index`` on the depth camera's own clock: index / fps (30 fps)
+        + depth_phase_s."""
+        return index / self.depth_model.fps + self.depth_phase_s
+
+    def depth_index_near(self, time_s: float) -> int:
+        """The depth frame nearest ``time_s``."""
+        return round((time_s - self.depth_phase_s) * self.depth_model.fps)
+
+    def _depth(self, index: int) -> tuple[NDArray[np.uint16], _DepthViews]:
+        """Depth frame ``index`` (noisy Z16) and the renders it was made of."""
         cal = self.calibration
-        seen = self._depth_views(self.pose_at(t_depth))
+        seen = self._depth_views(self.pose_at(self.depth_time_s(index)))
         depth = depth_units(
-            seen.hits.z_m,
-            cal.depth.fx,
-            cal.depth_scale_m,
-            self.depth_model,
-            self.rng,
-            seen.shadow,
+            seen.hits.z_m, cal.depth.fx, cal.depth_scale_m, self.depth_model, self.rng, seen.shadow
         )
-        counts, telemetry = self.sensor.read(t_thermal, self._aperture(self.pose_at(t_thermal)))
-        ir = None
-        if seen.ir_albedo is not None:
-            ir = ir_image(seen.ir_albedo, self.depth_model, self.rng)
+        return depth, seen
+
+    def _ir(self, seen: _DepthViews) -> NDArray[np.uint8] | None:
+        """The IR image of a depth frame's renders (None without ``with_ir``)."""
+        if seen.ir_albedo is None:
+            return None
+        return ir_image(seen.ir_albedo, self.depth_model, self.rng)
+
+    def _thermal(self) -> ThermalFrame:
+        """The next thermal frame (the sensor reads frames in order)."""
+        k = self._index
+        t = self.thermal_time_s(k)
+        counts, telemetry = self.sensor.read(t, self.aperture_at(t))
         self._index += 1
+        return ThermalFrame(np.asarray(counts, dtype=np.uint16), t, k, telemetry)
+
+    def frame(self) -> FramePair:
+        """The next frame pair: thermal frame k at :meth:`thermal_time_s`, paired with the
+        nearest depth frame (30 fps, offset by depth_phase_s); each rendered at its own
+        time's pose."""
+        j = self.depth_index_near(self.thermal_time_s(self._index))
+        depth, seen = self._depth(j)
+        thermal = self._thermal()
+        ir = self._ir(seen)  # drawn after the thermal noise, as it always was
         return FramePair(
-            depth, np.asarray(counts, dtype=np.uint16), t_depth, t_thermal, telemetry, k, ir
+            depth,
+            thermal.counts,
+            self.depth_time_s(j),
+            thermal.time_s,
+            thermal.telemetry,
+            thermal.index,
+            ir,
         )
+
+    def depth_frame(self, index: int) -> DepthFrame:
+        """Depth frame ``index`` of the depth camera's own clock (:meth:`depth_time_s`)."""
+        depth, seen = self._depth(index)
+        return DepthFrame(depth, self.depth_time_s(index), index, self._ir(seen))
+
+    def _plan(self, duration_s: float) -> tuple[range, dict[int, int]]:
+        """The depth frames (indices) and the thermal frames (each index with its depth
+        frame's) of :meth:`stream` over ``duration_s``."""
+        end_s = self.start_s + duration_s + 1e-9
+        near: dict[int, int] = {}
+        k = self._index
+        while self.thermal_time_s(k) <= end_s:
+            near[k] = self.depth_index_near(self.thermal_time_s(k))
+            k += 1
+        fps, phase = self.depth_model.fps, self.depth_phase_s
+        first = min([math.ceil((self.start_s - phase) * fps - 1e-9), *near.values()])
+        last = max([math.floor((end_s - phase) * fps), *near.values()])
+        return range(first, last + 1), near
+
+    def stream_counts(self, duration_s: float) -> tuple[int, int]:
+        """How many depth and thermal frames :meth:`stream` gives over ``duration_s``."""
+        depth, near = self._plan(duration_s)
+        return len(depth), len(near)
+
+    def stream(self, duration_s: float) -> Iterator[StreamEvent]:
+        """Every frame of both cameras from start_s for ``duration_s`` (a new rig's; after
+        :meth:`frame` calls, from the next thermal frame), as a live rig sends them: the
+        depth frames on the depth camera's clock (:meth:`depth_time_s`) and the thermal
+        frames on the thermal camera's (:meth:`thermal_time_s`), in time order, each thermal
+        frame's :class:`~thermodepth.frames.Match` with the nearest depth frame as soon as
+        both are out (numbered as the thermal frame). Each frame is rendered once, at its
+        own time's pose."""
+        depth_indices, near = self._plan(duration_s)
+        j, last_j = depth_indices.start, depth_indices.stop - 1
+        last_k = max(near, default=self._index - 1)
+        depth: dict[int, DepthFrame] = {}
+        pending: list[ThermalFrame] = []  # thermal frames whose depth frame is to come
+        while j <= last_j or self._index <= last_k:
+            k = self._index
+            if k > last_k or (j <= last_j and self.depth_time_s(j) <= self.thermal_time_s(k)):
+                depth[j] = self.depth_frame(j)
+                yield depth[j]
+                j += 1
+            else:
+                pending.append(self._thermal())
+                yield pending[-1]
+            while pending and near[pending[0].index] < j:
+                thermal = pending.pop(0)
+                d = depth[near[thermal.index]]
+                yield Match(d, thermal, pair_of(d, thermal, thermal.index))
+            keep = near[pending[0].index] if pending else near.get(self._index, j)
+            for old in [i for i in depth if i < keep]:
+                del depth[old]
 
     def frames(self, n: int | None = None) -> Iterator[FramePair]:
         """Yield ``n`` frame pairs (forever if None)."""
@@ -277,3 +383,9 @@ class Rig:
             thermal_temp_k=surface_properties(self.scene, th)[0],
             thermal_rect=th.rect,
         )
+
+
+def _same_pose(a: RigidTransform, b: RigidTransform) -> bool:
+    return bool(
+        np.array_equal(a.rotation, b.rotation) and np.array_equal(a.translation_m, b.translation_m)
+    )

@@ -14,6 +14,7 @@ relative humidity.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -27,12 +28,20 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Material:
-    """Surface properties: temp_k (K), LWIR emissivity (0..1], ir_albedo (near-IR, 0..1)."""
+    """Surface properties: temp_k (K), LWIR emissivity (0..1], ir_albedo (near-IR, 0..1).
+
+    emissivity is the normal one. directional: it falls at oblique views as a smooth
+    surface's does (:func:`~thermodepth.radiometry.fresnel_emissivity`; otherwise the same
+    at every angle); specular: the surface reflects, as a mirror, what its mirrored ray sees
+    (otherwise it reflects the ambient, a diffuse surface in a uniform room).
+    """
 
     temp_k: float
     emissivity: float = 0.95
     ir_albedo: float = 0.5
     name: str = ""
+    directional: bool = False
+    specular: bool = False
 
     def __post_init__(self) -> None:
         if not 0 < self.emissivity <= 1:
@@ -176,6 +185,39 @@ def box(
 
 
 @dataclass(frozen=True, eq=False)
+class RectArrays:
+    """A scene's rects as arrays: center_m, axis_u, axis_v, normal (R, 3) and half_m (R, 2)
+    (half sizes along u and v), metres."""
+
+    center_m: FloatArray
+    axis_u: FloatArray
+    axis_v: FloatArray
+    normal: FloatArray
+    half_m: FloatArray
+
+    @classmethod
+    def of(cls, rects: tuple[Rect, ...]) -> RectArrays:
+        def stack(values: list[FloatArray]) -> FloatArray:
+            return np.array(values, dtype=np.float64).reshape(-1, 3)
+
+        return cls(
+            stack([r.center_m for r in rects]),
+            stack([r.axis_u for r in rects]),
+            stack([r.axis_v for r in rects]),
+            stack([r.normal for r in rects]),
+            np.array([[r.half_u_m, r.half_v_m] for r in rects], np.float64).reshape(-1, 2),
+        )
+
+    def points_m(self, rect: NDArray[np.int64], s_m: FloatArray, q_m: FloatArray) -> FloatArray:
+        """World points (N, 3) at local coordinates (s, q) (N,) on rects ``rect`` (N,)."""
+        return (
+            self.center_m[rect]
+            + s_m[:, None] * self.axis_u[rect]
+            + q_m[:, None] * self.axis_v[rect]
+        )
+
+
+@dataclass(frozen=True, eq=False)
 class Scene:
     """Surfaces plus the air: ambient (and reflected) temperature, relative humidity.
 
@@ -193,6 +235,28 @@ class Scene:
 
     def index(self, name: str) -> int:
         return self.names[name]
+
+    @cached_property
+    def geometry(self) -> RectArrays:
+        """The rects as arrays (for vectorised work on many points)."""
+        return RectArrays.of(self.rects)
+
+    @cached_property
+    def outlines_m(self) -> FloatArray:
+        """Points (R, 128, 3) along each rect's edges (:meth:`Rect.boundary_m`)."""
+        return np.array([r.boundary_m() for r in self.rects], np.float64).reshape(-1, 128, 3)
+
+    @property
+    def materials(self) -> tuple[Material, ...]:
+        """Every material of the rects (a patterned rect's two)."""
+        both = ((r.material, r.material_b) for r in self.rects)
+        return tuple(m for pair in both for m in pair if m is not None)
+
+    @cached_property
+    def has_optics(self) -> bool:
+        """Whether a material is directional or specular (the thermal render then needs the
+        viewing direction)."""
+        return any(m.directional or m.specular for m in self.materials)
 
 
 def plate_scene(
