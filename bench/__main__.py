@@ -19,6 +19,7 @@ BENCHMARKS = [
     "bench_monitor",
     "bench_dashboard",
     "bench_export",
+    "bench_odometry",
 ]
 
 

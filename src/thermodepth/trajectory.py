@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -115,7 +116,10 @@ class Trajectory:
     def save_tum(self, path: str | Path) -> Path:
         """Write the TUM file at ``path``."""
         path = Path(path)
-        body = "\n".join(" ".join(f"{v:.9g}" for v in row) for row in self.tum_rows())
+        # times to the nanosecond whatever the epoch, the rest to 9 significant digits
+        body = "\n".join(
+            f"{row[0]:.9f} " + " ".join(f"{v:.9g}" for v in row[1:]) for row in self.tum_rows()
+        )
         path.write_text(f"{TUM_HEADER}\n{body}\n")
         return path
 
@@ -150,3 +154,60 @@ class Trajectory:
         if not rows:
             raise InputError(f"{path}: no poses")
         return cls.of_tum_rows(rows)
+
+
+def rigid_alignment(source_m: ArrayLike, target_m: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """The rotation R (3, 3) and translation t (3,) m minimising sum |target - (R source + t)|^2
+    over paired points (N, 3) m, without scale (Horn 1987, "Closed-form solution of absolute
+    orientation using unit quaternions", JOSA A 4(4); Umeyama 1991, "Least-squares
+    estimation of transformation parameters between two point patterns", IEEE PAMI 13(4),
+    whose sign correction keeps R a rotation). Points on one line leave the rotation about it
+    undetermined."""
+    src = np.asarray(source_m, np.float64).reshape(-1, 3)
+    dst = np.asarray(target_m, np.float64).reshape(-1, 3)
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    u, _, vt = np.linalg.svd((dst - mu_d).T @ (src - mu_s))
+    sign = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt)) or 1.0])
+    rot = u @ sign @ vt
+    return rot, mu_d - rot @ mu_s
+
+
+def absolute_trajectory_error(estimate: Trajectory, truth: Trajectory) -> dict[str, Any]:
+    """How far an estimated trajectory is from the truth, as the TUM RGB-D benchmark's ATE
+    (Sturm et al., IROS 2012, section VI-B).
+
+    The truth is interpolated at the estimate's times (which must lie within the truth's);
+    the estimate's positions are aligned to it by the rigid motion that fits them best
+    (:func:`rigid_alignment`: rotation and translation, no scale), since the two worlds'
+    origins differ; the errors are the aligned positions' distances from the truth's.
+    Returns, in metres: ``rmse_m`` (the ATE), ``mean_m``, ``median_m``, ``max_m``; in
+    degrees, the angle of each aligned pose's rotation relative to the truth's (R_true^T R
+    R_est, the relative rotation error): ``rotation_rmse_deg``, ``rotation_median_deg``,
+    ``rotation_max_deg``; and the alignment, ``truth_from_estimate`` (a
+    :class:`~thermodepth.camera.RigidTransform` from the estimate's world to the truth's).
+    Three or more poses.
+    """
+    t = estimate.times_s
+    slack_s = 1e-6  # times read back from a file round to its digits
+    if t[0] < truth.times_s[0] - slack_s or t[-1] > truth.times_s[-1] + slack_s:
+        raise InputError(
+            f"the estimate's times ({t[0]:.3f}-{t[-1]:.3f} s) go beyond the truth's "
+            f"({truth.times_s[0]:.3f}-{truth.times_s[-1]:.3f} s)"
+        )
+    if len(t) < 3:
+        raise InputError(f"an absolute trajectory error needs 3 or more poses, got {len(t)}")
+    rot_true, pos_true = truth.poses_at(t)
+    rot, shift = rigid_alignment(estimate.translations_m, pos_true)
+    err_m = np.linalg.norm(estimate.translations_m @ rot.T + shift - pos_true, axis=1)
+    rel = np.einsum("nji,jk,nkl->nil", rot_true, rot, estimate.rotations)
+    err_deg = np.degrees(Rotation.from_matrix(rel).magnitude())
+    return {
+        "rmse_m": float(np.sqrt(np.mean(err_m**2))),
+        "mean_m": float(np.mean(err_m)),
+        "median_m": float(np.median(err_m)),
+        "max_m": float(np.max(err_m)),
+        "rotation_rmse_deg": float(np.sqrt(np.mean(err_deg**2))),
+        "rotation_median_deg": float(np.median(err_deg)),
+        "rotation_max_deg": float(np.max(err_deg)),
+        "truth_from_estimate": RigidTransform(rot, shift, "truth", "estimate"),
+    }

@@ -1,0 +1,1 @@
+"""3D thermal mapping from a moving rig: trajectory, fused volume, model."""
