@@ -504,7 +504,8 @@ class Pipeline:
 
     # -- steps ------------------------------------------------------------------------------
 
-    def _check(self, pair: FramePair) -> None:
+    def check_sizes(self, pair: FramePair) -> None:
+        """InputError naming the frame when an image's size is not its camera's."""
         cal = self.calibration
         for name, img, intr in (
             ("depth", pair.depth, cal.depth),
@@ -563,7 +564,7 @@ class Pipeline:
 
     def process(self, pair: FramePair) -> FusedFrame:
         """Fuse one frame pair (steps in the module docstring)."""
-        self._check(pair)
+        self.check_sizes(pair)
         radiometry = self.radiometry_of(pair)
         s = self.settings
         near = self.registration.depth_to_thermal(pair.depth)

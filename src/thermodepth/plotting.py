@@ -24,7 +24,8 @@ def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
     """Lay out, write (creating the folder) and close a figure; returns the path."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:  # a figure laid out by its own engine keeps it
+        fig.tight_layout()
     fig.savefig(out, dpi=dpi)
     pyplot().close(fig)
     return out

@@ -7,7 +7,7 @@ gave the field (``--emissivity: ...``). One module per group of commands; :mod:`
 the app, the error handling and the shared options.
 """
 
-from . import batch, calibrate, compensation, measure, simulate
+from . import batch, calibrate, compensation, measure, simulate, thermal_map
 from .base import app
 from .measure import print_frame
 
@@ -20,6 +20,7 @@ __all__ = [
     "measure",
     "print_frame",
     "simulate",
+    "thermal_map",
 ]
 
 

@@ -28,6 +28,7 @@ from ..calibration import Calibration
 from ..camera import Intrinsics, RigidTransform
 from ..errors import InputError
 from ..frames import FramePair
+from ..trajectory import Trajectory
 
 INSTALL = "ROS bags and MCAP need the ros extra: pip install 'thermodepth[ros]'"
 DEPTH_ENCODINGS = {"16UC1": "u2", "mono16": "u2", "32FC1": "f4"}
@@ -106,18 +107,69 @@ def matrix_quaternion(r: NDArray[np.float64]) -> tuple[float, float, float, floa
     return float(x), float(y), float(z), float(w)
 
 
-def static_transforms(messages: Iterable[Any]) -> list[RigidTransform]:
-    """Every TransformStamped of TFMessages as ``parent_from_child`` (a child's pose in its
-    parent: p_parent = R p_child + t)."""
+def stamped_transforms(messages: Iterable[Any]) -> list[tuple[float, RigidTransform]]:
+    """Every TransformStamped of TFMessages as its stamp (s) and ``parent_from_child`` (a
+    child's pose in its parent: p_parent = R p_child + t)."""
     out = []
     for msg in messages:
         for t in msg.transforms:
             q, v = t.transform.rotation, t.transform.translation
-            out.append(RigidTransform(
+            out.append((stamp_s(t.header.stamp), RigidTransform(
                 quaternion_matrix(q.x, q.y, q.z, q.w), np.array([v.x, v.y, v.z]),
                 t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/"),
-            ))  # fmt: skip
+            )))  # fmt: skip
     return out
+
+
+def static_transforms(messages: Iterable[Any]) -> list[RigidTransform]:
+    """Every TransformStamped of TFMessages as ``parent_from_child``, stamps set aside."""
+    return [t for _, t in stamped_transforms(messages)]
+
+
+def tf_trajectory(
+    statics: list[RigidTransform], moving: list[tuple[float, RigidTransform]], frame: str
+) -> tuple[Trajectory, str] | None:
+    """``frame``'s poses in the root of the transform tree over time, from the tree's
+    ``statics`` and its ``moving`` transforms (stamped, /tf): at each stamp of the moving
+    transforms on the way from the root down to ``frame``, each of them interpolated to it
+    (slerp) and composed with the static ones; and the root's name. None when no moving
+    transform lies on that way."""
+    parent: dict[str, tuple[str, bool]] = {t.from_frame: (t.to_frame, False) for t in statics}
+    series: dict[tuple[str, str], list[tuple[float, RigidTransform]]] = {}
+    for stamp, t in moving:
+        parent[t.from_frame] = (t.to_frame, True)
+        series.setdefault((t.to_frame, t.from_frame), []).append((stamp, t))
+    static_of = {(t.to_frame, t.from_frame): t for t in statics}
+    path, at, seen = [], frame, {frame}
+    while at in parent:  # up from the frame to the root
+        up, moves = parent[at]
+        path.append(((up, at), moves))
+        if up in seen:
+            return None  # a loop is no tree
+        seen.add(up)
+        at = up
+    edges = {key: _edge_trajectory(series[key]) for key, moves in path if moves}
+    if not edges:
+        return None
+    times = np.unique(np.concatenate([e.times_s for e in edges.values()]))
+    rot = np.repeat(np.eye(3)[None], len(times), 0)
+    pos = np.zeros((len(times), 3))
+    for key, moves in path:  # frame's pose in each parent in turn, up to the root
+        if moves:
+            r, p = edges[key].poses_at(times)
+        else:
+            t = static_of[key]
+            r, p = t.rotation[None], t.translation_m[None]
+        pos = np.einsum("nij,nj->ni", r, pos) + p
+        rot = r @ rot
+    return Trajectory(times, rot, pos), at
+
+
+def _edge_trajectory(samples: list[tuple[float, RigidTransform]]) -> Trajectory:
+    """One moving transform's samples as a trajectory (a stamp given twice: the last)."""
+    by_time = {stamp: t for stamp, t in sorted(samples, key=lambda s: s[0])}
+    times = np.array(list(by_time))
+    return Trajectory.of_poses(times, list(by_time.values()))
 
 
 def transform_between(

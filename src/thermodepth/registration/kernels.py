@@ -143,6 +143,17 @@ def _project(d, scale, a0, a1, a2, b0, b1, b2, lens):  # pragma: no cover - JIT
     return uu, vv, px, py, pz, idx
 
 
+
+@numba.njit(inline="always", **_JIT)
+def project_point(x, y, z, lens):  # pragma: no cover - JIT
+    # A point (x, y, z) in the camera's own frame (a lens of zero translation) -> (u, v), z
+    # and its nearest-pixel index (-2 outside the image or the lens' valid radius): the same
+    # rounding as every depth pixel's, for the map's voxels and vertices.
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    uu, vv, _, _, pz, idx = _project(one, one, x, y, z, zero, zero, zero, lens)
+    return uu, vv, pz, idx
+
 # The thermal camera sees only part of the depth image (56 of 89 deg here). On one depth
 # row, the pixels that land in the thermal image at inverse depth w = 1/z form one interval,
 # whose ends move monotonically with w (parallax). A table of those intervals over a grid of

@@ -39,6 +39,7 @@ from ..frames import Match, StreamEvent
 from ..measure import PolygonRoi, RectRoi
 from ..pipeline import FusedFrame, ViewerSettings
 from ..plotting import temperature_rgb
+from ..trajectory import Trajectory
 from .base import BaseSink, RunContext, SessionResult
 
 INSTALL = "the viewer needs rerun-sdk: pip install 'thermodepth[viewer]'"
@@ -334,3 +335,36 @@ def viewer_sink(
     if connect is not None:
         return ViewerSink("connect", connect, settings, warn)
     return ViewerSink("spawn", None, settings, warn) if spawn else None
+
+
+def save_model(
+    path: Path,
+    vertices: NDArray[np.float64],
+    triangles: NDArray[np.int64],
+    normals: NDArray[np.float64],
+    rgb: NDArray[np.uint8],
+    trajectory: Trajectory,
+    hotspots_m: list[NDArray[np.float64]],
+) -> Path:
+    """A thermal model for rerun (``rerun model.rrd``): the mesh coloured by temperature, the
+    camera's path, the hotspots' centres (world m)."""
+    import rerun as rr
+
+    rec = rr.RecordingStream("thermodepth-map")
+    rec.save(str(path))
+    rec.log("world", rr.ViewCoordinates.RDF, static=True)
+    rec.log(
+        "world/model",
+        rr.Mesh3D(
+            vertex_positions=vertices,
+            triangle_indices=triangles,
+            vertex_normals=normals,
+            vertex_colors=rgb,
+        ),
+        static=True,
+    )
+    rec.log("world/trajectory", rr.LineStrips3D([trajectory.translations_m]), static=True)
+    if hotspots_m:
+        rec.log("world/hotspots", rr.Points3D(np.array(hotspots_m), radii=0.02), static=True)
+    rec.flush()
+    return path

@@ -12,6 +12,7 @@ from typing import Any
 from ..calibration import Calibration
 from ..errors import InputError, ThermodepthError
 from ..frames import DepthFrame, FramePair, Match, StreamEvent, ThermalFrame
+from ..trajectory import Trajectory
 from .pairing import PairingStats
 
 
@@ -69,6 +70,11 @@ class Source:
                 on_event(event)
             if isinstance(event, Match):
                 yield event.pair
+
+    def trajectory(self) -> tuple[Trajectory, str] | None:
+        """The depth camera's poses over time where the source knows them (a bag's ``/tf``),
+        with one line saying whence; None: it does not."""
+        return None
 
     def __iter__(self) -> Iterator[FramePair]:
         return self.pairs()

@@ -51,11 +51,13 @@ from ..io.ros import (
     intrinsics_of,
     stamp_ns,
     stamp_s,
-    static_transforms,
+    stamped_transforms,
+    tf_trajectory,
     transform_between,
     typestore,
 )
 from ..radiometry import RAW_COUNTS
+from ..trajectory import Trajectory
 from .base import Source
 from .pairing import DEFAULT_MAX_SKEW_S, StreamPairer
 
@@ -206,10 +208,7 @@ class RosbagSource(Source):
                 )
         depth_frame = first[self.depth_topic].header.frame_id.lstrip("/")
         thermal_frame = first[self.thermal_topic].header.frame_id.lstrip("/")
-        statics = [c for c in self._connections("/tf_static") if c.msgtype == TF]
-        found = self.reader.messages(connections=statics) if statics else ()
-        tf = [self.reader.deserialize(raw, c.msgtype) for c, _, raw in found]
-        between = transform_between(static_transforms(tf), thermal_frame, depth_frame)
+        between = transform_between(self._transforms("/tf_static"), thermal_frame, depth_frame)
         if between is not None:
             extrinsics = RigidTransform(between.rotation, between.translation_m, "thermal", "depth")
             said.append(f"thermal_from_depth from /tf_static ({depth_frame} -> {thermal_frame})")
@@ -227,6 +226,25 @@ class RosbagSource(Source):
         calibration = Calibration(cams["depth"], cams["thermal"], scale, extrinsics, output)
         topics = f"depth {self.depth_topic}, thermal {self.thermal_topic}"
         return calibration, f"{topics}; {'; '.join(said)}"
+
+    def _stamped(self, topic: str) -> list[tuple[float, RigidTransform]]:
+        """Every transform on a TF topic, with its stamp."""
+        conns = [c for c in self._connections(topic) if c.msgtype == TF]
+        found = self.reader.messages(connections=conns) if conns else ()
+        return stamped_transforms(self.reader.deserialize(raw, c.msgtype) for c, _, raw in found)
+
+    def _transforms(self, topic: str) -> list[RigidTransform]:
+        return [t for _, t in self._stamped(topic)]
+
+    def trajectory(self) -> tuple[Trajectory, str] | None:
+        """The depth camera's poses over time from ``/tf`` (with ``/tf_static``), in the root
+        frame of the tree, and one line saying so; None when ``/tf`` does not move it."""
+        frame = self._first(self.depth_topic).header.frame_id.lstrip("/")
+        found = tf_trajectory(self._transforms("/tf_static"), self._stamped("/tf"), frame)
+        if found is None:
+            return None
+        trajectory, root = found
+        return trajectory, f"/tf ({root} -> {frame}, {len(trajectory)} poses)"
 
     # -- the frames ---------------------------------------------------------------------------
 
