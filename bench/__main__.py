@@ -20,6 +20,7 @@ BENCHMARKS = [
     "bench_dashboard",
     "bench_export",
     "bench_odometry",
+    "bench_map",
 ]
 
 

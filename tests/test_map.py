@@ -94,7 +94,7 @@ def _flat_views(
     for k, (t_c, yaw) in enumerate(zip(temps_c, yaws_deg, strict=True)):
         pose = camera_pose(dist_m, yaw_deg=yaw).inverse()
         thermal_from_world = RigidTransform(pose.rotation, pose.translation_m, "thermal", "world")
-        z = render_z(verts.astype(np.float32), thermal_from_world, lens_for(THERMAL), 0.02)
+        z = render_z(verts.astype(np.float32), [thermal_from_world], lens_for(THERMAL), 0.02)[0]
         temp = np.full(THERMAL.shape, t_c, np.float32)
         edge = np.full(THERMAL.shape, 10.0, np.float32)
         views.append(ThermalView(float(k), thermal_from_world, temp, z, edge, 1.0, 0.0))
@@ -293,3 +293,29 @@ def test_a_bags_tf_gives_the_depth_cameras_poses(tmp_path: Path) -> None:
     np.testing.assert_allclose(trajectory.rotations, expected.rotations, atol=1e-9)
     np.testing.assert_allclose(trajectory.translations_m, expected.translations_m, atol=1e-9)
     assert isinstance(rig.calibration, Calibration)
+
+
+def test_the_model_for_rerun_is_read_back_by_reruns_reader(tmp_path: Path) -> None:
+    pytest.importorskip("rerun", reason="the viewer needs the viewer extra (rerun-sdk)")
+    from rerun.chunk import RrdReader
+
+    from thermodepth.sinks.viewer import save_model
+    from thermodepth.trajectory import Trajectory
+
+    rng = np.random.default_rng(1)
+    verts = rng.normal(size=(40, 3))
+    faces = rng.integers(0, 40, size=(25, 3))
+    normals = verts / np.linalg.norm(verts, axis=1, keepdims=True)
+    rgb = rng.integers(0, 255, size=(40, 3)).astype(np.uint8)
+    path = Trajectory.of_poses([0.0, 1.0], [camera_pose(1.0), camera_pose(1.0, yaw_deg=10.0)])
+    rrd = save_model(tmp_path / "m.rrd", verts, faces, normals, rgb, path, [verts[0]])
+    reader = RrdReader(str(rrd))
+    assert {"/world/model", "/world/trajectory", "/world/hotspots"} <= set(
+        reader.store().schema().entity_paths()
+    )
+    chunks = list(reader.stream().filter(content="/world/model", is_static=True))
+    batch = chunks[0].to_record_batch()
+    got = np.array(batch.column("Mesh3D:vertex_positions").to_pylist()[0])
+    np.testing.assert_allclose(got, verts.astype(np.float32), rtol=1e-6)
+    tri = np.array(batch.column("Mesh3D:triangle_indices").to_pylist()[0])
+    np.testing.assert_array_equal(tri, faces)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 import json
 import time
+import warnings
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -24,25 +25,28 @@ from numcodecs import Blosc
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
-from ..camera import pixel_rays
+from ..camera import RigidTransform, pixel_rays
 from ..conditions import Radiometry
 from ..errors import FieldError, InputError
 from ..frames import DepthFrame, FramePair, Match
 from ..io.model import temperature_colours, write_model_glb, write_model_ply
+from ..io.recording import CorruptFrameError, Recording
 from ..io.report import Report
 from ..mapping.fusion import (
     FUSION_METHODS,
     FusionOptions,
     ThermalView,
+    VertexBlocks,
     fuse,
     make_view,
+    render_z,
     view_peak,
 )
 from ..mapping.metrics import measure_map
 from ..mapping.model import Hotspot3D, ThermalModel
 from ..mapping.odometry import depth_odometry
 from ..mapping.render import orbit_views, render
-from ..mapping.volume import Volume
+from ..mapping.volume import Volume, lens_for
 from ..pipeline import Pipeline, Settings
 from ..plotting import pyplot, save_figure
 from ..progress import SILENT, Reporter
@@ -51,7 +55,7 @@ from ..trajectory import Trajectory
 from .run import Warn, check_source, open_choice, spec_of
 
 FloatArray = NDArray[np.float64]
-_CODEC = Blosc("zstd", 3, Blosc.BITSHUFFLE)  # depth frames in memory: 6-10x smaller
+_CODEC = Blosc("lz4", 5, Blosc.BITSHUFFLE)  # depth frames in memory: a few times smaller, fast
 _NO_DEPTH = np.zeros((0, 0), np.uint16)  # a kept pair's depth lives in the walk's frames
 
 
@@ -170,6 +174,17 @@ def _read(
                 advance(1)
     finally:
         src.close()
+    kind, _, path = options.source.partition(":")
+    if kind == "recording":  # a replay gives its pairs; odometry wants every depth frame too
+        tell = warn or (lambda line: warnings.warn(line, stacklevel=2))
+        rec = Recording(path, warn=tell)
+        with reporter.task("reading the depth frames", rec.n_depth) as advance:
+            for row in range(rec.n_depth):
+                try:
+                    walk.keep_depth(rec.depth_frame(row))
+                except CorruptFrameError as exc:  # one line, and on with the next
+                    tell(f"{path}: depth row {row} skipped ({exc})")
+                advance(1)
     if len(walk.pairs) < 2:
         raise InputError(f"{options.source}: {len(walk.pairs)} pairs; a map needs a walk")
     return walk, pipeline
@@ -241,20 +256,27 @@ def _views(
     pipeline: Pipeline,
     trajectory: Trajectory,
     vertices: FloatArray,
+    blocks: VertexBlocks,
     options: MapOptions,
     reporter: Reporter,
 ) -> list[ThermalView]:
-    """Every ``every``-th pair's thermal frame as a view at its own time's pose."""
+    """Every ``every``-th pair's thermal frame as a view at its own time's pose: the mesh
+    rendered into all of them at once (in parallel, each view only the blocks it may see),
+    then each frame's temperatures at the ranges so found."""
     cal = walk.calibration
     rays = pixel_rays(cal.thermal)
-    verts = np.ascontiguousarray(vertices, np.float32)
     chosen = walk.pairs[:: options.every]
     speeds = trajectory.angular_speed_deg_s([p.thermal_time_s for p, _, _ in chosen])
+    rot, pos = trajectory.poses_at([p.thermal_time_s for p, _, _ in chosen])
+    poses = [
+        cal.thermal_from_depth @ RigidTransform(r, t, "world", "depth").inverse()
+        for r, t in zip(rot, pos, strict=True)
+    ]
+    seen = np.stack([blocks.in_view(p, cal.thermal) for p in poses])
     views = []
     with reporter.task("thermal views", len(chosen)) as advance:
-        for (pair, radiometry, bad), speed in zip(chosen, speeds, strict=True):
-            pose = trajectory.pose_at(pair.thermal_time_s)
-            thermal_from_world = cal.thermal_from_depth @ pose.inverse()
+        z_all = render_z(vertices, poses, lens_for(cal.thermal), options.voxel_m, blocks, seen)
+        for k, ((pair, radiometry, bad), speed) in enumerate(zip(chosen, speeds, strict=True)):
 
             def temperature(
                 range_m: FloatArray, pair: FramePair = pair, r: Radiometry = radiometry
@@ -267,7 +289,7 @@ def _views(
 
             views.append(
                 make_view(
-                    pair.thermal_time_s, thermal_from_world, verts, cal.thermal, rays,
+                    pair.thermal_time_s, poses[k], z_all[k], seen[k], cal.thermal, rays,
                     options.voxel_m, temperature, bad, float(speed), options.fusion,
                 )
             )  # fmt: skip
@@ -293,8 +315,9 @@ def build_map(
     vertices, triangles, normals = volume.mesh()
     if not len(vertices):
         raise InputError(f"{options.source}: the depth frames made no surface")
+    vertices, triangles, normals, blocks = VertexBlocks.sort(vertices, triangles, normals)
     clock["geometry"] = time.perf_counter()
-    views = _views(walk, pipeline, trajectory, vertices, options, reporter)
+    views = _views(walk, pipeline, trajectory, vertices, blocks, options, reporter)
     conditions = pipeline.radiometry.conditions
     emissivity = float(conditions.emissivity)
     reflected_c = float(
@@ -304,7 +327,7 @@ def build_map(
     )
     surface = fuse(
         vertices, normals, views, walk.calibration.thermal, options.voxel_m, emissivity,
-        reflected_c, options.fusion,
+        reflected_c, options.fusion, blocks,
     )  # fmt: skip
     clock["temperature"] = time.perf_counter()
     model = ThermalModel(vertices, triangles, normals, surface, options.voxel_m)

@@ -88,7 +88,8 @@ class ThermalView:
     """One thermal frame as the fusion takes it: time_s; thermal_from_world at that time;
     temp_c (h, w) its temperatures (NaN: none); z_m (h, w) the mesh's nearest Z in this view
     (inf: none); edge_px (h, w) each pixel's distance to the nearest depth edge, pixels;
-    weight (0..1: shutter and motion); smear_px (how far the image smeared)."""
+    weight (0..1: shutter and motion); smear_px (how far the image smeared); blocks_seen
+    (B,): which of the mesh's :class:`VertexBlocks` may be in view (None: all)."""
 
     time_s: float
     thermal_from_world: RigidTransform
@@ -97,6 +98,68 @@ class ThermalView:
     edge_px: NDArray[np.float32]
     weight: float
     smear_px: float
+    blocks_seen: NDArray[np.bool_] | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class VertexBlocks:
+    """A mesh's vertices in cubes of ``side_m``, numbered cube by cube, so that a view skips
+    the cubes out of its sight without looking at their vertices: start (B + 1,) the first
+    vertex of each cube (cube b holds vertices start[b] .. start[b + 1] - 1), block_of (V,)
+    each vertex's cube, centre_m (B, 3) and radius_m (B,) a sphere holding each cube's
+    vertices (world m)."""
+
+    start: NDArray[np.int64]
+    block_of: NDArray[np.int32]
+    centre_m: FloatArray
+    radius_m: FloatArray
+
+    @staticmethod
+    def sort(
+        vertices: FloatArray,
+        triangles: NDArray[np.int64],
+        normals: FloatArray,
+        side_m: float = 0.25,
+    ) -> tuple[FloatArray, NDArray[np.int64], FloatArray, VertexBlocks]:
+        """The mesh with its vertices renumbered cube by cube, and its blocks."""
+        keys = np.floor(vertices / side_m).astype(np.int64)
+        _, cube = np.unique(keys, axis=0, return_inverse=True)
+        cube = cube.reshape(-1)
+        order = np.argsort(cube, kind="stable")
+        renumber = np.empty_like(order)
+        renumber[order] = np.arange(len(order))
+        verts, block_of = vertices[order], cube[order].astype(np.int32)
+        n = int(block_of.max()) + 1 if len(block_of) else 0
+        count = np.bincount(block_of, minlength=n)
+        start = np.concatenate([[0], np.cumsum(count)])
+        sums = np.stack([np.bincount(block_of, verts[:, k], n) for k in range(3)], axis=1)
+        centre: FloatArray = sums / np.maximum(count, 1)[:, None]
+        radius = np.zeros(n)
+        np.maximum.at(radius, block_of, np.linalg.norm(verts - centre[block_of], axis=1))
+        blocks = VertexBlocks(start, block_of, centre, radius)
+        return verts, renumber[triangles], normals[order], blocks
+
+    @staticmethod
+    def one(n_vertices: int) -> VertexBlocks:
+        """All vertices in one block, always looked at."""
+        return VertexBlocks(
+            np.array([0, n_vertices]), np.zeros(n_vertices, np.int32), np.zeros((1, 3)),
+            np.full(1, np.inf),
+        )  # fmt: skip
+
+    def in_view(self, camera_from_world: RigidTransform, intr: Intrinsics) -> NDArray[np.bool_]:
+        """(B,) whether each cube's sphere may reach into the image (pinhole, with a margin
+        for the lens' distortion): in front of the camera and within the image's cone."""
+        c = self.centre_m @ camera_from_world.rotation.T + camera_from_world.translation_m
+        z, r = c[:, 2], self.radius_m
+        zz = np.maximum(z - r, 0.01)
+        # the sphere's reach in pixels at its nearest depth, plus 10 % of the image
+        reach = r * max(intr.fx, intr.fy) / zz + 0.1 * max(intr.width, intr.height)
+        u = intr.fx * c[:, 0] / np.maximum(z, 0.01) + intr.cx
+        v = intr.fy * c[:, 1] / np.maximum(z, 0.01) + intr.cy
+        inside = (u > -reach) & (u < intr.width + reach) & (v > -reach) & (v < intr.height + reach)
+        touching = z - r <= 0.01  # a sphere across the camera's plane: always looked at
+        return (z + r > 0.01) & (inside | touching)
 
 
 def view_weight(in_ffc: bool, smear_px: float, options: FusionOptions) -> float:
@@ -114,47 +177,63 @@ def smear_px(angular_speed_deg_s: float, fx_px: float, time_constant_s: float) -
     return float(np.radians(angular_speed_deg_s) * time_constant_s * fx_px)
 
 
-@numba.njit(**_JIT)
-def _zbuffer(verts, rot, t, lens, voxel, out):  # pragma: no cover - JIT
-    # The nearest Z of the mesh's vertices per pixel, each a disc about the size of the gap
-    # between vertices there (so a surface has no holes that would show what is behind it).
+@numba.njit(parallel=True, **_JIT)
+def _zbuffers(verts, start, seen, rots, trans, lens, voxel, out):  # pragma: no cover - JIT
+    # Per view (in parallel), the nearest Z of the mesh's vertices per pixel, each a disc
+    # about the size of the gap between vertices there (so a surface has no holes that would
+    # show what is behind it); only the blocks the view may see.
     width = np.int32(lens.width)
     height = np.int32(lens.height)
-    for n in range(verts.shape[0]):
-        x = rot[0, 0] * verts[n, 0] + rot[0, 1] * verts[n, 1] + rot[0, 2] * verts[n, 2] + t[0]
-        y = rot[1, 0] * verts[n, 0] + rot[1, 1] * verts[n, 1] + rot[1, 2] * verts[n, 2] + t[1]
-        z = rot[2, 0] * verts[n, 0] + rot[2, 1] * verts[n, 1] + rot[2, 2] * verts[n, 2] + t[2]
-        if z <= 0.01:
-            continue
-        uu, vv, pz, idx = project_point(x, y, z, lens)
-        if idx < -1 and not (-8 < uu < width + 8 and -8 < vv < height + 8):
-            continue
-        # vertices are about a voxel apart: a disc of 3/4 of that gap, rounded, covers it
-        r = int(0.75 * voxel * lens.fx / pz + 0.5)
-        cu = int(np.floor(uu + 0.5))
-        cv = int(np.floor(vv + 0.5))
-        for dv in range(-r, r + 1):
-            row = cv + dv
-            if row < 0 or row >= height:
+    for k in numba.prange(rots.shape[0]):
+        rot, t, zbuf = rots[k], trans[k], out[k]
+        for b in range(start.shape[0] - 1):
+            if not seen[k, b]:
                 continue
-            for du in range(-r, r + 1):
-                col = cu + du
-                if 0 <= col < width and pz < out[row, col]:
-                    out[row, col] = pz
+            for n in range(start[b], start[b + 1]):
+                vx, vy, vz = verts[n, 0], verts[n, 1], verts[n, 2]
+                x = rot[0, 0] * vx + rot[0, 1] * vy + rot[0, 2] * vz + t[0]
+                y = rot[1, 0] * vx + rot[1, 1] * vy + rot[1, 2] * vz + t[1]
+                z = rot[2, 0] * vx + rot[2, 1] * vy + rot[2, 2] * vz + t[2]
+                if z <= 0.01:
+                    continue
+                uu, vv, pz, idx = project_point(x, y, z, lens)
+                if idx < -1 and not (-8 < uu < width + 8 and -8 < vv < height + 8):
+                    continue
+                # vertices are about a voxel apart: a disc of 3/4 of that gap covers it
+                r = int(0.75 * voxel * lens.fx / pz + 0.5)
+                cu = int(np.floor(uu + 0.5))
+                cv = int(np.floor(vv + 0.5))
+                for dv in range(-r, r + 1):
+                    row = cv + dv
+                    if row < 0 or row >= height:
+                        continue
+                    for du in range(-r, r + 1):
+                        col = cu + du
+                        if 0 <= col < width and pz < zbuf[row, col]:
+                            zbuf[row, col] = pz
 
 
 def render_z(
-    vertices: NDArray[np.float32],
-    thermal_from_world: RigidTransform,
+    vertices: NDArray[np.floating],
+    thermal_from_world: list[RigidTransform],
     lens: Lens,
     voxel_m: float,
+    blocks: VertexBlocks | None = None,
+    seen: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float32]:
-    """The mesh's nearest Z (m) in a camera (h, w), inf where no vertex falls."""
-    out = np.full((int(lens.height), int(lens.width)), np.inf, np.float32)
-    _zbuffer(
-        vertices,
-        thermal_from_world.rotation.astype(np.float32),
-        thermal_from_world.translation_m.astype(np.float32),
+    """The mesh's nearest Z (m) in a camera at each of its poses (n, h, w), inf where no
+    vertex falls; only the vertices of the ``blocks`` each view has ``seen`` (n, B) (None:
+    all, in one block)."""
+    n = len(thermal_from_world)
+    out = np.full((n, int(lens.height), int(lens.width)), np.inf, np.float32)
+    if blocks is None or seen is None:
+        blocks, seen = VertexBlocks.one(len(vertices)), np.ones((n, 1), np.bool_)
+    _zbuffers(
+        np.ascontiguousarray(vertices, np.float32),
+        blocks.start,
+        seen,
+        np.array([p.rotation for p in thermal_from_world], np.float32).reshape(n, 3, 3),
+        np.array([p.translation_m for p in thermal_from_world], np.float32).reshape(n, 3),
         lens,
         np.float32(voxel_m),
         out,
@@ -187,7 +266,8 @@ def range_of(z_m: NDArray[np.float32], rays: tuple[FloatArray, FloatArray]) -> F
 def make_view(
     time_s: float,
     thermal_from_world: RigidTransform,
-    vertices: NDArray[np.float32],
+    z_m: NDArray[np.float32],
+    seen: NDArray[np.bool_],
     thermal: Intrinsics,
     rays: tuple[FloatArray, FloatArray],
     voxel_m: float,
@@ -196,48 +276,42 @@ def make_view(
     angular_speed_deg_s: float,
     options: FusionOptions,
 ) -> ThermalView:
-    """A :class:`ThermalView`: the mesh rendered into the thermal camera at its pose, the
-    frame's temperatures at each pixel's range from it (``temperature(range_m)``), its edges
-    and its own weight."""
-    z = render_z(vertices, thermal_from_world, lens_for(thermal), voxel_m)
+    """A :class:`ThermalView` of the mesh rendered into the thermal camera at its pose
+    (``z_m``, :func:`render_z`; the blocks it may see, ``seen``): the frame's temperatures at
+    each pixel's range from it (``temperature(range_m)``), its edges and its own weight."""
     smear = smear_px(angular_speed_deg_s, thermal.fx, options.thermal_time_constant_s)
     weight = view_weight(in_ffc, smear, options)
-    if weight > 0 or options.method == "plain":
-        temp = np.asarray(temperature(range_of(z, rays)), np.float32)
-    else:
-        temp = np.full(z.shape, np.nan, np.float32)
     if in_ffc:  # the shutter's image is no one's temperature, not even the baseline's
-        temp = np.full(z.shape, np.nan, np.float32)
-    return ThermalView(
-        time_s, thermal_from_world, temp, z, edge_distance_px(z, voxel_m), weight, smear
-    )
+        temp = np.full(z_m.shape, np.nan, np.float32)
+    else:
+        temp = np.asarray(temperature(range_of(z_m, rays)), np.float32)
+    edges = edge_distance_px(z_m, voxel_m)
+    return ThermalView(time_s, thermal_from_world, temp, z_m, edges, weight, smear, seen)
+
+
+@numba.njit(**_JIT)
+def _weighted_median(values, ws, n, total):  # pragma: no cover - JIT
+    # The value at which the sorted samples' weights pass half of their total.
+    order = np.argsort(values[:n])
+    acc = 0.0
+    for i in range(n):
+        acc += ws[order[i]]
+        if acc >= 0.5 * total:
+            return values[order[i]], order
+    return values[order[n - 1]], order
 
 
 @numba.njit(**_JIT)
 def _reduce(temps, ws, n, method):  # pragma: no cover - JIT
     # (temperature, spread) of n weighted samples: median, trimmed (middle half) or mean.
-    order = np.argsort(temps[:n])
     total = 0.0
     for i in range(n):
         total += ws[i]
-    med = temps[order[n - 1]]
-    acc = 0.0
-    for i in range(n):
-        acc += ws[order[i]]
-        if acc >= 0.5 * total:
-            med = temps[order[i]]
-            break
+    med, order = _weighted_median(temps, ws, n, total)
     dev = np.empty(n, np.float32)
     for i in range(n):
         dev[i] = abs(temps[i] - med)
-    dorder = np.argsort(dev)
-    mad = dev[dorder[n - 1]]
-    acc = 0.0
-    for i in range(n):
-        acc += ws[dorder[i]]
-        if acc >= 0.5 * total:
-            mad = dev[dorder[i]]
-            break
+    mad, _ = _weighted_median(dev, ws, n, total)
     spread = 1.4826 * mad
     if method == 0:
         return med, spread
@@ -257,7 +331,7 @@ def _reduce(temps, ws, n, method):  # pragma: no cover - JIT
 
 @numba.njit(parallel=True, **_JIT)
 def _fuse(
-    verts, normals, rots, trans, times, temps, zs, edges, view_w, lens, voxel,
+    verts, normals, block_of, seen, rots, trans, times, temps, zs, edges, view_w, lens, voxel,
     cos_min, edge_lo, edge_hi, fp_ratio, lut_t, lut_l, lut_cos, lut_eps, eps_n, l_refl, method,
     out,
 ):  # fmt: skip  # pragma: no cover - JIT
@@ -278,7 +352,10 @@ def _fuse(
         wsum = 0.0
         px, py, pz = verts[v, 0], verts[v, 1], verts[v, 2]
         nx, ny, nz = normals[v, 0], normals[v, 1], normals[v, 2]
+        block = block_of[v]
         for k in range(nv):
+            if not seen[k, block]:
+                continue
             r = rots[k]
             x = r[0, 0] * px + r[0, 1] * py + r[0, 2] * pz + trans[k, 0]
             y = r[1, 0] * px + r[1, 1] * py + r[1, 2] * pz + trans[k, 1]
@@ -379,10 +456,12 @@ def fuse(
     emissivity: float,
     reflected_temp_c: float,
     options: FusionOptions = FusionOptions(),
+    blocks: VertexBlocks | None = None,
 ) -> SurfaceTemperature:
     """Fuse ``views`` onto the mesh's ``vertices`` (V, 3) with their unit ``normals`` (V, 3),
     world m (module docstring); ``emissivity`` and ``reflected_temp_c`` are those the views'
-    temperatures were made with (the normal emissivity of the surface)."""
+    temperatures were made with (the normal emissivity of the surface); ``blocks``: the
+    vertices' blocks the views' ``blocks_seen`` refer to (None: every view sees all)."""
     if options.method not in FUSION_METHODS:
         raise ValueError(f"fusion method {options.method!r}: choose from {list(FUSION_METHODS)}")
     n_v = len(vertices)
@@ -398,6 +477,7 @@ def fuse(
         _fuse(
             np.ascontiguousarray(vertices, np.float32),
             np.ascontiguousarray(normals, np.float32),
+            *_seen_by_views(n_v, views, blocks),
             np.array([v.thermal_from_world.rotation for v in views], np.float32),
             np.array([v.thermal_from_world.translation_m for v in views], np.float32),
             np.array([v.time_s for v in views], np.float64),
@@ -425,11 +505,21 @@ def fuse(
     )
 
 
+def _seen_by_views(
+    n_vertices: int, views: list[ThermalView], blocks: VertexBlocks | None
+) -> tuple[NDArray[np.int32], NDArray[np.bool_]]:
+    """Each vertex's block, and (n_views, B) which blocks each view may see."""
+    masks = [v.blocks_seen for v in views]
+    if blocks is None or any(m is None for m in masks):
+        return VertexBlocks.one(n_vertices).block_of, np.ones((len(views), 1), np.bool_)
+    return blocks.block_of, np.stack([m for m in masks if m is not None])
+
+
 @lru_cache(maxsize=1)
 def _radiance_table() -> tuple[FloatArray, FloatArray]:
-    """Band radiance (8-14 um) on a grid of temperatures, -70 .. 900 C in 0.01 C: for L(T)
-    and its inverse by interpolation (error below 1e-4 C)."""
-    grid_c = np.linspace(-70.0, 900.0, 97001)
+    """Band radiance (8-14 um) on a grid of temperatures, -70 .. 900 C in 0.05 C: for L(T)
+    and its inverse by interpolation (error below 1e-3 C)."""
+    grid_c = np.linspace(-70.0, 900.0, 19401)
     return grid_c, band_radiance(grid_c + ZERO_C_IN_K)
 
 

@@ -9,8 +9,10 @@ first moved into the truth's world by the rigid alignment of its trajectory to t
   surface point the walk's depth frames saw: its distance to the nearest vertex), Chamfer
   distance (their mean), precision, recall and F-score at ``near_m`` (Knapitsch et al.,
   Tanks and Temples, 2017);
-- coverage: the share of true surface points seen by the thermal camera that have a vertex
-  with a temperature within ``near_m``;
+- coverage: the share of true surface points seen by the thermal camera (in one of the
+  truth's counted frames; ``coverage_seen_3``: in three) that have a vertex with a
+  temperature within ``near_m`` (the truth counts what each camera saw within the
+  depth a map fuses by default, 3 m);
 - temperature: on vertices within ``near_m`` of a true surface whose emissivity is the one
   the map was made with (others cannot read true with one emissivity), with 3 trusted views
   or more: the error of the fused temperature and of the baseline (plain averaging) against
@@ -101,13 +103,16 @@ def measure_map(
     recall = float(np.mean(d_truth < near_m))
     s = model.surface
     has_temp = np.isfinite(s.temp_c)
-    thermal_seen = truth.seen_thermal >= 1
-    covered = 0.0
-    if has_temp.any() and thermal_seen.any():
-        d_cov, _ = cKDTree(verts[has_temp]).query(
-            samples[thermal_seen], distance_upper_bound=near_m
-        )
-        covered = float(np.mean(np.isfinite(d_cov)))
+    covered = {}
+    for views in (1, 3):  # the truth counts every seen_step-th frame
+        thermal_seen = truth.seen_thermal >= views
+        share = 0.0
+        if has_temp.any() and thermal_seen.any():
+            d_cov, _ = cKDTree(verts[has_temp]).query(
+                samples[thermal_seen], distance_upper_bound=near_m
+            )
+            share = float(np.mean(np.isfinite(d_cov)))
+        covered[views] = round(share, 4)
     same_emissivity = np.abs(truth.emissivity[rect] - emissivity) <= 0.03
     judged = (dist < near_m) & same_emissivity & (s.views >= min_views) & has_temp
     true_c = temp_k - ZERO_C_IN_K
@@ -122,14 +127,15 @@ def measure_map(
             "f_score": round(2 * precision * recall / max(precision + recall, 1e-12), 4),
             "at_m": near_m,
         },
-        "coverage": round(covered, 4),
+        "coverage": covered[1],
+        "coverage_seen_3": covered[3],
         "temperature": {
             "vertices": int(judged.sum()),
             "fused": _errors(s.temp_c[judged] - true_c[judged]),
             "plain_average": _errors(s.plain_c[judged] - true_c[judged]),
         },
         "hotspots": _hotspot_errors(
-            hotspots, tuple(h for h in truth.hotspots if h.temp_c >= hotspot_c), align
+            hotspots, tuple(h for h in truth.hotspots if h.temp_c >= hotspot_c), align, truth
         ),
     }
     fused, plain = out["temperature"]["fused"], out["temperature"]["plain_average"]
@@ -139,12 +145,15 @@ def measure_map(
 
 
 def _hotspot_errors(
-    found: list[Hotspot3D], true: tuple[TrueHotspot, ...], align: RigidTransform
+    found: list[Hotspot3D], true: tuple[TrueHotspot, ...], align: RigidTransform, truth: Truth
 ) -> list[dict[str, Any]]:
     """Per true hotspot: the found one nearest to its bounds, the distance of its centre
-    from them (0 inside) and from their centre, and its peak's error."""
+    from them (0 inside) and from their centre, its peak's error, and the emissivity of the
+    surface under its peak (a peak read with another emissivity than its own is off by
+    that, not by the map)."""
     rows = []
     centres = align.apply(np.array([f.centre_m for f in found])) if found else np.zeros((0, 3))
+    peak_m = align.apply(np.array([f.peak_m for f in found])) if found else np.zeros((0, 3))
     for h in true:
         row: dict[str, Any] = {"name": h.name, "temp_c": h.temp_c, "found": False}
         if found:
@@ -158,6 +167,9 @@ def _hotspot_errors(
                 centre_distance_m=round(float(np.linalg.norm(centres[k] - h.center_m)), 4),
                 peak_error_c=round(found[k].peak_c - h.temp_c, 3),
                 fused_peak_error_c=round(found[k].fused_peak_c - h.temp_c, 3),
+                emissivity=round(
+                    float(truth.emissivity[truth.nearest(peak_m[k : k + 1])[2][0]]), 3
+                ),
             )
         rows.append(row)
     return rows

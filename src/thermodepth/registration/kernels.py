@@ -143,7 +143,6 @@ def _project(d, scale, a0, a1, a2, b0, b1, b2, lens):  # pragma: no cover - JIT
     return uu, vv, px, py, pz, idx
 
 
-
 @numba.njit(inline="always", **_JIT)
 def project_point(x, y, z, lens):  # pragma: no cover - JIT
     # A point (x, y, z) in the camera's own frame (a lens of zero translation) -> (u, v), z
@@ -153,6 +152,7 @@ def project_point(x, y, z, lens):  # pragma: no cover - JIT
     zero = np.float32(0.0)
     uu, vv, _, _, pz, idx = _project(one, one, x, y, z, zero, zero, zero, lens)
     return uu, vv, pz, idx
+
 
 # The thermal camera sees only part of the depth image (56 of 89 deg here). On one depth
 # row, the pixels that land in the thermal image at inverse depth w = 1/z form one interval,
