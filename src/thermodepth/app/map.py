@@ -531,13 +531,17 @@ def _write_hotspots(path: Path, hotspots: list[Hotspot3D]) -> Path:
 def _pictures(
     out: Path, model: ThermalModel, rgb: NDArray[np.uint8], scale: dict[str, Any], up: FloatArray
 ) -> list[Path]:
-    """Four views of the model around it (rendered offscreen) with the colour scale."""
+    """Four views of the model around what has a temperature (rendered offscreen, from 30
+    degrees above) with the colour scale."""
     plt = pyplot()
     fig, grid = plt.subplots(
         2, 3, figsize=(12.5, 9), gridspec_kw={"width_ratios": [1, 1, 0.04]}, layout="constrained"
     )
     axes = grid[:, :2]
-    for ax, (name, view) in zip(axes.ravel(), orbit_views(model.vertices, up), strict=True):
+    # framed on the surface that has a temperature: the subject, not the hall round it
+    has = np.isfinite(model.temp_c)
+    subject = model.vertices[has] if has.sum() >= 100 else model.vertices
+    for ax, (name, view) in zip(axes.ravel(), orbit_views(subject, up), strict=True):
         ax.imshow(render(model.vertices, model.triangles, model.normals, rgb, view))
         ax.set_title(name)
         ax.axis("off")

@@ -19,7 +19,7 @@ first moved into the truth's world by the rigid alignment of its trajectory to t
   the surface's temperature: MAE, p95 of the absolute error, and both again beyond the
   camera's own bias (the median error, which no fusion can remove);
 - hotspots: for each true hotspot at or above the map's threshold (a hot part's bounds),
-  the model's hotspot nearest to it:
+  the model's hotspot whose centre or peak is nearest to it (found within 5 cm):
   the distance of its centre from the part's bounds and from their centre, and its peak's
   error.
 """
@@ -158,12 +158,18 @@ def _hotspot_errors(
         row: dict[str, Any] = {"name": h.name, "temp_c": h.temp_c, "found": False}
         if found:
             half = np.asarray(h.size_m) / 2
-            outside = np.maximum(np.abs(centres - np.asarray(h.center_m)) - half, 0.0)
-            d = np.linalg.norm(outside, axis=1)
+
+            def to_bounds(p: FloatArray, h: TrueHotspot = h, half: FloatArray = half) -> FloatArray:
+                return np.linalg.norm(np.maximum(np.abs(p - h.center_m) - half, 0.0), axis=1)
+
+            # a long part (a pipe) may be found as one hot stretch with its neighbour: its
+            # centre then lies off the part, its peak on it
+            d = np.minimum(to_bounds(centres), to_bounds(peak_m))
             k = int(np.argmin(d))
             row.update(
                 found=bool(d[k] < 0.05),
-                distance_m=round(float(d[k]), 4),
+                distance_m=round(float(to_bounds(centres[k : k + 1])[0]), 4),
+                peak_distance_m=round(float(to_bounds(peak_m[k : k + 1])[0]), 4),
                 centre_distance_m=round(float(np.linalg.norm(centres[k] - h.center_m)), 4),
                 peak_error_c=round(found[k].peak_c - h.temp_c, 3),
                 fused_peak_error_c=round(found[k].fused_peak_c - h.temp_c, 3),

@@ -200,7 +200,7 @@ class Volume:
         return len(blocks)
 
     def mesh(
-        self, min_weight: float = 1.0, min_part_voxels: float = 25.0
+        self, min_weight: float = 1.0, min_part_voxels: int = 25
     ) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
         """The surface: vertices (V, 3) world m, triangles (F, 3), unit normals (V, 3) pointing
         out of the surface (towards where the cameras were). Marching cubes on the cubes whose
@@ -225,9 +225,8 @@ class Volume:
         verts, faces, normals, _ = marching_cubes(
             self.tsdf, 0.0, spacing=(self.voxel_m,) * 3, mask=mask, gradient_direction="descent"
         )
-        verts, faces, normals = _without_small_parts(
-            verts, faces, normals, min_part_voxels * self.voxel_m**2
-        )
+        # a voxel's face of surface is about two triangles
+        verts, faces, normals = _without_small_parts(verts, faces, normals, 2 * min_part_voxels)
         # scikit-image's normals point down the gradient's opposite here (into the surface,
         # towards negative tsdf) while its "descent" winding faces the free side: flip them
         return (
@@ -238,17 +237,16 @@ class Volume:
 
 
 def _without_small_parts(
-    verts: FloatArray, faces: NDArray[np.int64], normals: FloatArray, min_area_m2: float
+    verts: FloatArray, faces: NDArray[np.int64], normals: FloatArray, min_faces: int
 ) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
-    """The mesh without its connected parts of less than ``min_area_m2``, vertices renumbered."""
+    """The mesh without its connected parts of fewer than ``min_faces`` triangles, vertices
+    renumbered."""
     n = len(verts)
     edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
-    a, b, c = (verts[faces[:, k]] for k in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    part_area = np.bincount(labels[faces[:, 0]], weights=area, minlength=labels.max() + 1)
-    keep_face = part_area[labels[faces[:, 0]]] >= min_area_m2
+    part = labels[faces[:, 0]]
+    keep_face = np.bincount(part)[part] >= min_faces
     keep_vert = np.zeros(n, bool)
     keep_vert[faces[keep_face].ravel()] = True
     new_index = np.cumsum(keep_vert) - 1
