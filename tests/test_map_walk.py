@@ -6,6 +6,7 @@ measured by ``bench/bench_map.py``.)"""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,9 @@ pytest.importorskip("trimesh", reason="the map's model.glb needs the map extra (
 
 from thermodepth.app.map import MapOptions, build_map
 from thermodepth.cli import app
+from thermodepth.io.folder import write_folder
 from thermodepth.io.model import read_model_ply
+from thermodepth.io.recording import Recording
 from thermodepth.sim.walk_truth import read_walk_truth
 from thermodepth.sim.walkaround import simulate_walkaround
 from thermodepth.trajectory import Trajectory
@@ -84,7 +87,9 @@ def test_the_model_files_hold_what_the_report_says(mapped: dict) -> None:
     assert len(trajectory) == report["walk"]["depth_frames"]
 
 
-def test_a_given_trajectory_is_used_as_it_is(walk: Path, settings: Path, tmp_path: Path) -> None:
+def test_a_given_trajectory_is_used_as_it_is_and_a_folder_maps_as_its_recording(
+    walk: Path, settings: Path, tmp_path: Path
+) -> None:
     truth = read_walk_truth(walk)
     assert truth is not None
     tum = truth.trajectory.save_tum(tmp_path / "walk.tum")
@@ -93,6 +98,13 @@ def test_a_given_trajectory_is_used_as_it_is(walk: Path, settings: Path, tmp_pat
     assert result.report["trajectory"]["from"] == str(tum)
     assert result.report["against_truth"]["trajectory"]["rmse_m"] < 1e-6
     assert result.report["walk"]["views"] == (result.report["walk"]["pairs"] + 1) // 2
+    # the same pairs as a folder of images, with the same trajectory: the same model
+    rec = Recording(walk)
+    folder = write_folder(tmp_path / "folder", rec.calibration, rec.pairs())
+    again = build_map(replace(options, source=f"folder:{folder}", out=tmp_path / "f"))
+    assert "against_truth" not in again.report  # a folder carries no truth
+    np.testing.assert_array_equal(again.model.vertices, result.model.vertices)
+    np.testing.assert_array_equal(again.model.temp_c, result.model.temp_c)
 
 
 @pytest.mark.parametrize(
@@ -102,10 +114,12 @@ def test_a_given_trajectory_is_used_as_it_is(walk: Path, settings: Path, tmp_pat
         (["--method", "best"], "--method: 'best': choose median, trimmed, mean, plain"),
         (["--trajectory", "nowhere.tum"], "--trajectory: nowhere.tum: no such file"),
         (["--every", "0"], "--every: must be >= 1"),
+        (["sim"], "source: the simulated rig stands still and never ends"),
     ],
 )
 def test_bad_options_are_one_line(walk: Path, tmp_path: Path, args: list[str], line: str) -> None:
-    result = runner.invoke(app, ["map", str(walk), "-o", str(tmp_path / "m"), *args])
+    source = [] if args == ["sim"] else [str(walk)]
+    result = runner.invoke(app, ["map", *source, "-o", str(tmp_path / "m"), *args])
     assert result.exit_code != 0
     assert line in result.output
     assert len(result.output.strip().splitlines()) == 1

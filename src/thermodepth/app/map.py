@@ -52,7 +52,7 @@ from ..plotting import pyplot, save_figure
 from ..progress import SILENT, Reporter
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
 from ..trajectory import Trajectory
-from .run import Warn, check_source, open_choice, spec_of
+from .run import Warn, check_source, never_ends, open_choice, spec_of
 
 FloatArray = NDArray[np.float64]
 _CODEC = Blosc("lz4", 5, Blosc.BITSHUFFLE)  # depth frames in memory: a few times smaller, fast
@@ -92,6 +92,12 @@ class MapOptions:
     def check(self) -> None:
         """One FieldError for an option that cannot be."""
         check_source(self)
+        if never_ends(self.source):
+            raise FieldError(
+                "source",
+                "the simulated rig stands still and never ends: map a walk's recording "
+                "(thermodepth simulate walkaround -o walk.zarr)",
+            )
         if not 0.002 <= self.voxel_m <= 0.2:
             raise FieldError("voxel_m", f"{self.voxel_m}: give 0.002 .. 0.2 m")
         if not self.max_range_m > 0:
