@@ -26,7 +26,7 @@ from thermodepth.sim.walkaround import simulate_walkaround
 from thermodepth.trajectory import Trajectory
 
 runner = CliRunner()
-WALK_S = 2.5
+WALK_S = 1.5
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +50,7 @@ def mapped(walk: Path, settings: Path, tmp_path_factory: pytest.TempPathFactory)
     )
     assert result.exit_code == 0, result.output
     assert "model of" in result.output and "against the truth" in result.output
-    return {"out": out, "report": json.loads((out / "map_report.json").read_text())}
+    return {"out": out, "report": json.loads((out / "map_report.json").read_text()), "walk": walk}
 
 
 def test_the_model_of_a_walk_matches_its_truth(mapped: dict) -> None:
@@ -65,8 +65,9 @@ def test_the_model_of_a_walk_matches_its_truth(mapped: dict) -> None:
     assert t["vertices"] > 1000
     assert t["fused"]["mae_c"] < 0.6
     assert t["fused"]["p95_c"] < 2.0
-    assert report["walk"]["depth_frames"] == round(WALK_S * 30)  # every one, not only the pairs'
-    assert report["walk"]["views"] == report["walk"]["pairs"] > 15
+    rec = Recording(mapped["walk"])
+    assert report["walk"]["depth_frames"] == rec.n_depth > 40  # every one, not the pairs' only
+    assert report["walk"]["views"] == report["walk"]["pairs"] == rec.n_pairs > 10
 
 
 def test_the_model_files_hold_what_the_report_says(mapped: dict) -> None:
