@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -34,6 +35,7 @@ from thermodepth.sim.walkaround import (
     WalkConfig,
     machine_scene,
     part_hotspot,
+    room_scene,
     simulate_walkaround,
     walk_rig,
     walkaround_path,
@@ -187,6 +189,94 @@ def test_the_machine_walk_comes_within_80_cm_of_the_hot_terminal() -> None:
     _, truth = walkaround_trajectory("machine")
     terminal = np.array(part_hotspot(machine_scene(), "terminal").center_m)
     assert np.linalg.norm(truth.translations_m - terminal, axis=1).min() < 0.8
+
+
+def _weakest_direction(scene: Scene, pose: RigidTransform, intr: Intrinsics) -> float:
+    """How well a depth view fixes the camera's pose: the smallest eigenvalue of the
+    point-to-plane information sum [p x n, n][p x n, n]^T over its points (camera frame, m)
+    over the largest. A plane leaves 3 of the 6 degrees of freedom free (0); a corner or a
+    box fixes them all."""
+    hits = cast(scene, pose.inverse(), intr)
+    ok = hits.rect >= 0
+    xs = (np.arange(intr.width) - intr.cx) / intr.fx
+    ys = (np.arange(intr.height) - intr.cy) / intr.fy
+    rays = np.stack(np.broadcast_arrays(xs[None, :], ys[:, None], 1.0), axis=-1)
+    points = (rays * hits.z_m[..., None])[ok]
+    normals = scene.geometry.normal[hits.rect[ok]] @ pose.rotation  # world to camera
+    j = np.concatenate([np.cross(points, normals), normals], axis=1)
+    eig = np.linalg.eigvalsh(j.T @ j)
+    return float(eig[0] / eig[-1])
+
+
+_D435_COARSE = Intrinsics(96, 54, 48.375, 48.375, 47.5, 26.5)  # the D435's 87 x 58 deg FOV
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_every_view_of_the_room_walk_fixes_the_depth_cameras_pose(seed: int) -> None:
+    # every half second, glances included: a corner or furniture in view, never a bare
+    # wall (a walk 0.5 m from the bare walls of an empty room scores 0 in a third of its)
+    scene, path = room_scene(), walkaround_path("room", seed=seed)
+    times = np.arange(path.start_s, path.end_s, 0.5)
+    weakest = [_weakest_direction(scene, path.pose_at(t), _D435_COARSE) for t in times]
+    assert min(weakest) > 1e-3  # measured 3e-3 (seed 1) and 7e-3 (seed 0)
+
+
+def test_the_room_walk_sees_every_wall_the_radiator_and_the_window() -> None:
+    scene, path = room_scene(), walkaround_path("room")
+    seen: set[str] = set()
+    for t in np.arange(path.start_s, path.end_s, 0.5):
+        hits = cast(scene, path.pose_at(t).inverse(), _D435_COARSE)
+        ids, counts = np.unique(hits.rect[hits.rect >= 0], return_counts=True)
+        seen |= {scene.rects[i].name for i, n in zip(ids, counts, strict=True) if n >= 20}
+    walls = {"floor", "ceiling", "west", "east", "south", "north", "north-east-of-window"}
+    assert walls | {"window", "radiator-x", "door", "sideboard+x", "computer-x", "lamp+y"} <= seen
+    _, pos = path.poses(np.linspace(path.start_s, path.end_s, 2001))
+    window = np.array(part_hotspot(scene, "window").center_m)
+    assert np.linalg.norm(pos - window, axis=1).min() < 1.3  # measured 1.20 m
+    assert np.abs(pos[:, [0, 2]]).max() < 1.2  # 0.8 m or more from the walls (0.84)
+
+
+def test_the_faces_the_room_leaves_out_are_never_seen(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the room's boxes leave out the faces against a wall, the floor or another part: the
+    # depth is the same as with every face, from the walk and from eyes anywhere in the room
+    from thermodepth.sim import walkaround
+
+    culled = room_scene()
+    block = walkaround._block
+
+    def every_face(*args: Any) -> list[Rect]:
+        return block(*args[:5])  # all but ``hidden``
+
+    monkeypatch.setattr(walkaround, "_block", every_face)
+    full = room_scene()
+    assert len(full.rects) > len(culled.rects) + 50
+    path = walkaround_path("room")
+    rng = np.random.default_rng(0)
+    poses = [path.pose_at(t).inverse() for t in np.arange(path.start_s, path.end_s, 1.0)]
+    for _ in range(40):  # eyes 0.1-2.35 m up clear of the furniture, looking anywhere
+        eye = rng.uniform([-1.2, -2.35, -1.2], [1.2, -0.1, 1.2])
+        yaw, pitch = rng.uniform(-180, 180), rng.uniform(-89, 89)
+        poses.append(camera_pose(0.0, yaw_deg=yaw, pitch_deg=pitch, target_m=eye).inverse())
+    for pose in poses:
+        z_culled = cast(culled, pose, _D435_COARSE).z_m
+        np.testing.assert_allclose(z_culled, cast(full, pose, _D435_COARSE).z_m, atol=1e-9)
+
+
+def test_the_rooms_window_mirrors_the_radiator_from_the_left() -> None:
+    scene, path = room_scene(), walkaround_path("room")
+    times = np.linspace(path.start_s, path.end_s, 4001)
+    _, pos = path.poses(times)
+    t = times[np.argmin(np.linalg.norm(pos - [-0.5, -1.4, 1.0], axis=1))]  # the waypoint
+    cal = walk_rig(WalkConfig.of("room"))[0].calibration
+    thermal_from_world = cal.thermal_from_depth @ path.pose_at(t).inverse()
+    hits = cast(scene, thermal_from_world, cal.thermal)
+    eye = thermal_from_world.inverse().translation_m
+    table = radiance_table()
+    glass = hits.rect == scene.index("window")
+    seen_k = table.to_kelvin(aperture_radiance(scene, hits, table, eye))[glass]
+    # the glass alone: 10 C at 0.84 reflecting the 21 C room, near 12 C
+    assert np.median(seen_k) - K < 14.0
+    assert seen_k.max() - K > 17.0  # the radiator's image: +7 K (measured)
 
 
 def test_a_short_walk_goes_out_and_back_at_a_pace() -> None:

@@ -8,18 +8,20 @@ heights are negative y):
   cold water pipe) beside an electrical cabinet with a hot terminal (a 3 cm spot at 80 C on
   its front), and a bare stainless guard (emissivity 0.3, a mirror) behind the motor that
   shows the motor and its bearings from the front right; in a 6 x 6 x 3.2 m hall at 22 C.
-- :func:`room_scene`: a 4 x 4 x 2.5 m room seen from inside at 21 C (walls, floor and
-  ceiling within 1.5 C of it), a radiator at 55 C, a window (glass at 10 C, emissivity 0.84,
-  a mirror that shows the radiator from the room's left side), a lacquered sideboard (0.88,
-  glossy), a ceiling lamp at 38 C and a computer at 30 C.
+- :func:`room_scene`: a furnished 4 x 4 x 2.5 m room seen from inside at 21 C (walls, floor
+  and ceiling within 1.5 C of it), a radiator at 55 C standing off the wall, a window in a
+  reveal (glass at 10 C, emissivity 0.84, a mirror that shows the radiator from the room's
+  left side), a door in its frame, skirting, a desk with a monitor and a computer at 30 C, a
+  shelf unit, a cabinet, a lacquered sideboard (0.88, glossy) and a ceiling lamp at 38 C.
 
 Every surface is directional (its emissivity falls beyond ~60 degrees from the normal, as a
 smooth paint's, glass's or metal's does: :func:`~thermodepth.radiometry.fresnel_emissivity`);
 the mirrors are specular (they reflect what their mirrored rays meet). The walks
 (:func:`walkaround_path`, :mod:`.handheld`): round the machine at 1-2 m with one approach to
-0.8 m of the hot terminal, back to the start; round the room from inside, turning to see every
-wall, the radiator and the window, back to the start. :func:`simulate_walkaround` records
-every frame of both cameras and the walk's truth (:mod:`.walk_truth`).
+0.8 m of the hot terminal, back to the start; round the room from inside, 0.85-1.3 m from
+the walls, turning to see every wall, the radiator and the window, back to the start: every
+view holds a corner or furniture, so a depth camera can track it. :func:`simulate_walkaround`
+records every frame of both cameras and the walk's truth (:mod:`.walk_truth`).
 """
 
 from __future__ import annotations
@@ -157,52 +159,169 @@ def machine_scene() -> Scene:
     return Scene(tuple(rects), 22.0 + K, 0.5)
 
 
-def room_scene() -> Scene:
-    """A room seen from inside (module docstring).
+Extent = tuple[float, float]
+"""From and to, m."""
 
-    Room x, z in -2..2 m, 2.5 m high; floor 20.5 C (0.95), ceiling 22, walls 21-21.4 but
-    the outside (north, +z) one at 19.5 (0.93). Window on the north wall, x 0.2-1.4 and
-    0.6-2.0 m up, glass at 10 C, emissivity 0.84, a mirror. Radiator on the east wall
-    (x = 1.93), z 0.6-1.6 and 0.25-0.9 m up, 55 C, 0.93. Door on the south wall, 20.8 C
-    (0.9). Sideboard against the west wall, 1.2 m long, 0.9 m high, lacquered (0.88,
-    glossy), 21 C. Ceiling lamp 0.3 m square at 38 C; a computer on the floor by the south
-    wall at 30 C. Air at 21 C, RH 50 %.
+
+_FACES = {"below": "+y", "above": "-y", "-x": "-x", "+x": "+x", "-z": "-z", "+z": "+z"}
+"""A box's faces by the side they face (y is down: its underside is :func:`~.scene.box`'s +y
+face)."""
+
+
+def _block(
+    x_m: Extent,
+    up_m: Extent,
+    z_m: Extent,
+    material: Material,
+    name: str,
+    hidden: tuple[str, ...] = (),
+) -> list[Rect]:
+    """A box by its extent: x_m and z_m, and up_m, from and to how high above the floor (y is
+    down, so it spans y = -up_m): furniture placed by where it stands. ``hidden``: faces
+    (:data:`_FACES`: "below", "above", "-x", "+x", "-z", "+z") flat against the floor, the
+    ceiling, a wall or another part, which no view can see; left out, as every rect costs
+    render time (one that crosses the camera's plane costs the whole image's)."""
+    (x0, x1), (h0, h1), (z0, z1) = x_m, up_m, z_m
+    centre = ((x0 + x1) / 2, -(h0 + h1) / 2, (z0 + z1) / 2)
+    faces = box(centre, (x1 - x0, h1 - h0, z1 - z0), material, name=name)
+    left_out = {name + _FACES[side] for side in hidden}
+    return [f for f in faces if f.name not in left_out]
+
+
+def _sheet(x_m: Extent, up_m: Extent, z_m: Extent, material: Material, name: str) -> Rect:
+    """A rect by its extent, as :func:`_block` takes it, flat along the one axis whose from
+    and to are equal: a piece of wall, or a board or panel too thin (2 cm) to be worth a box."""
+    lo = np.array([x_m[0], -up_m[1], z_m[0]])
+    hi = np.array([x_m[1], -up_m[0], z_m[1]])
+    flat = np.flatnonzero(hi - lo == 0.0)
+    if len(flat) != 1:
+        raise ValueError(f"sheet {name!r}: one extent must be flat, got {x_m}, {up_m}, {z_m}")
+    a, b = (k for k in range(3) if k != flat[0])
+    axes = np.eye(3)
+    half = (hi - lo) / 2
+    return Rect((lo + hi) / 2, axes[a], axes[b], half[a], half[b], material, name=name)
+
+
+ROOM_HALF_M = 2.0
+"""The room's walls stand at x, z = -2 and 2 m; its ceiling ROOM_HEIGHT_M up."""
+ROOM_HEIGHT_M = 2.5
+WINDOW_X_M = (0.2, 1.4)
+"""The window's opening in the north wall: x from, to (m), and WINDOW_UP_M, from and to how
+high up (m)."""
+WINDOW_UP_M = (0.6, 2.0)
+WINDOW_REVEAL_M = 0.15
+"""How far the glass sits back from the north wall's face (the reveal), m: the recess puts
+faces of all three orientations round the window, which a depth camera near it needs."""
+
+
+def room_scene() -> Scene:
+    """A furnished room seen from inside (module docstring).
+
+    Room x, z in -2..2 m, 2.5 m high; floor 20.5 C (vinyl, 0.95), ceiling 22, walls 21-21.4
+    but the outside (north, +z) one at 19.5 (0.93). Window: an opening in the north wall at
+    x 0.2-1.4 and 0.6-2.0 m up, the glass (10 C, emissivity 0.84, a mirror) 15 cm back in
+    its reveal (19 C), a window board below it (19.5, 0.9) 8 cm proud of the wall. Radiator
+    on the east wall, x 1.85-1.93 (7 cm off the wall on two brackets at 40 C), z 0.6-1.6 and
+    0.25-0.9 m up, 55 C, 0.93. Door on the south wall, x -1.45 to -0.55 and 2 m high (wood,
+    20.8 C, 0.9), in an architrave 7 cm wide and 2 cm proud, with a steel lever (0.3).
+    Skirting 8 cm high and 1.5 cm thick round the walls but the door, 20.8 C. A desk against
+    the south wall (x 0.1-1.5, 0.68 m deep, top 0.75 m up on four legs, wood 0.9, 21 C) with
+    a monitor on it (30 C, 0.9); a computer (30 C) on the floor beside it. An open shelf
+    unit against the east wall (z -1.1 to -0.3, 0.36 m deep, 1.2 m high, two shelves, with
+    books and boxes, 21 C, 0.9). A cabinet in the north-west corner (0.9 x 0.5 x 1.9 m, 21
+    C, 0.9). A sideboard against the west wall, 1.2 m long, 0.9 m high, lacquered (0.88,
+    glossy), 21 C. Ceiling lamp 0.3 m square at 38 C. Air at 21 C, RH 50 %.
     """
+    h, top = ROOM_HALF_M, ROOM_HEIGHT_M
     rects = _enclosure(
-        (-2.0, 2.0),
-        (-2.0, 2.0),
-        2.5,
+        (-h, h),
+        (-h, h),
+        top,
         {"floor": 20.5, "ceiling": 22.0, "west": 21.4, "east": 21.0, "south": 21.2, "north": 19.5},
     )
     rects[0] = replace(rects[0], material=_paint(20.5, 0.95, "vinyl"))
+    rects = [r for r in rects if r.name != "north"]  # rebuilt round the window's opening
+    (wx0, wx1), (wu0, wu1), back = WINDOW_X_M, WINDOW_UP_M, h + WINDOW_REVEAL_M
+    north, reveal = _paint(19.5, 0.93, "north"), _paint(19.0, 0.93, "reveal")
+    glass = _mirror(10.0, 0.84, "glass", albedo=0.1)
     rects += [
-        Rect(
-            np.array([0.8, -1.3, 1.998]),
-            EX,
-            EY,
-            0.6,
-            0.7,
-            _mirror(10.0, 0.84, "glass", albedo=0.1),
-            name="window",
-        ),
-        Rect(
-            np.array([-1.0, -1.0, -1.997]),
-            EX,
-            EY,
-            0.45,
-            1.0,
-            _paint(20.8, 0.9, "wood"),
-            name="door",
-        ),
+        _sheet((-h, wx0), (0.0, top), (h, h), north, "north"),
+        _sheet((wx1, h), (0.0, top), (h, h), north, "north-east-of-window"),
+        _sheet((wx0, wx1), (0.0, wu0), (h, h), north, "north-below-window"),
+        _sheet((wx0, wx1), (wu1, top), (h, h), north, "north-above-window"),
+        _sheet((wx0, wx0), WINDOW_UP_M, (h, back), reveal, "reveal-west"),
+        _sheet((wx1, wx1), WINDOW_UP_M, (h, back), reveal, "reveal-east"),
+        _sheet((wx0, wx1), (wu1, wu1), (h, back), reveal, "reveal-head"),
+        _sheet((wx0, wx1), WINDOW_UP_M, (back, back), glass, "window"),
     ]
-    rects += box(
-        (1.93, -0.575, 1.1), (0.08, 0.65, 1.0), _paint(55.0, 0.93, "radiator"), name="radiator"
+    board = _paint(19.5, 0.9, "board")
+    rects += _block((wx0 - 0.1, wx1 + 0.1), (wu0 - 0.03, wu0), (h - 0.08, back), board, "sill")
+    # the door in its architrave, its lever
+    wood = _paint(20.8, 0.9, "wood")
+    rects.append(_sheet((-1.45, -0.55), (0.0, 2.0), (0.01 - h,) * 2, wood, "door"))
+    frame = (-h, 0.02 - h)
+    rects += _block((-1.52, -1.45), (0.0, 2.07), frame, wood, "door-frame-west", ("-z", "below"))
+    rects += _block((-0.55, -0.48), (0.0, 2.07), frame, wood, "door-frame-east", ("-z", "below"))
+    rects += _block((-1.45, -0.55), (2.0, 2.07), frame, wood, "door-frame-head", ("-z", "-x", "+x"))
+    steel = _paint(21.0, 0.3, "steel")
+    rects += _block(
+        (-0.68, -0.56), (0.98, 1.02), (0.01 - h, 0.07 - h), steel, "door-lever", ("-z",)
     )
-    rects += box(
-        (-1.775, -0.45, 0.0), (0.45, 0.9, 1.2), _mirror(21.0, 0.88, "lacquer"), name="sideboard"
-    )
-    rects += box((0.5, -2.45, 1.0), (0.3, 0.1, 0.3), _paint(38.0, 0.9, "lamp"), name="lamp")
-    rects += box((1.2, -0.22, -1.7), (0.2, 0.44, 0.45), _paint(30.0, 0.93, "case"), name="computer")
+    # skirting round the walls, broken by the door: its front and top (its ends butt the
+    # walls or the door's frame)
+    skirting, low, thick = _paint(20.8, 0.93, "skirting"), (0.0, 0.08), 0.015
+    along_x, along_z = ("-x", "+x"), ("-z", "+z")
+    runs = {  # name: x, z extent; the faces against the wall and the ends
+        "skirting-west": ((-h, thick - h), (-h, h), ("-x", *along_z)),
+        "skirting-east": ((h - thick, h), (-h, h), ("+x", *along_z)),
+        "skirting-north": ((-h, h), (h - thick, h), ("+z", *along_x)),
+        "skirting-south-west": ((-h, -1.52), (-h, thick - h), ("-z", *along_x)),
+        "skirting-south-east": ((-0.48, h), (-h, thick - h), ("-z", *along_x)),
+    }
+    for name, (x_run, z_run, hidden) in runs.items():
+        rects += _block(x_run, low, z_run, skirting, name, ("below", *hidden))
+    # the radiator on its brackets
+    radiator = _paint(55.0, 0.93, "radiator")
+    rects += _block((1.85, 1.93), (0.25, 0.9), (0.6, 1.6), radiator, "radiator")
+    bracket = _paint(40.0, 0.9, "bracket")
+    for k, z in enumerate((0.75, 1.45)):
+        between = ("-x", "+x")  # the radiator's back, the wall
+        rects += _block(
+            (1.93, h), (0.7, 0.76), (z - 0.02, z + 0.02), bracket, f"bracket-{k}", between
+        )
+    # the desk, its monitor and the computer beside it
+    rects += _block((0.1, 1.5), (0.72, 0.75), (-1.98, -1.3), wood, "desk-top")
+    leg = _paint(21.0, 0.9, "leg")
+    for k, (x, z) in enumerate(((0.15, -1.93), (1.45, -1.93), (0.15, -1.35), (1.45, -1.35))):
+        span_x, span_z = (x - 0.025, x + 0.025), (z - 0.025, z + 0.025)
+        rects += _block(span_x, (0.0, 0.72), span_z, leg, f"desk-leg-{k}", ("below", "above"))
+    screen = _paint(30.0, 0.9, "screen")
+    rects += _block((0.52, 1.08), (0.98, 1.32), (-1.82, -1.78), screen, "monitor")
+    rects += _block((0.78, 0.82), (0.77, 0.98), (-1.86, -1.82), leg, "monitor-stand", ("below",))
+    rects += _block((0.7, 0.9), (0.75, 0.77), (-1.92, -1.76), leg, "monitor-foot", ("below",))
+    case = _paint(30.0, 0.93, "case")
+    rects += _block((1.6, 1.8), (0.0, 0.44), (-1.925, -1.475), case, "computer", ("below",))
+    # the open shelf unit on the east wall (boards 2 cm thick, as sheets), books and boxes
+    shelf, paper = _paint(21.0, 0.9, "shelf"), _paint(21.0, 0.9, "paper")
+    sx, (sz0, sz1) = 1.64, (-1.1, -0.3)
+    rects += [
+        _sheet((sx, h), (0.0, 1.2), (sz0, sz0), shelf, "shelf-side-south"),
+        _sheet((sx, h), (0.0, 1.2), (sz1, sz1), shelf, "shelf-side-north"),
+        _sheet((sx, h), (1.2, 1.2), (sz0, sz1), shelf, "shelf-top"),
+        _sheet((sx, h), (0.45, 0.45), (sz0, sz1), shelf, "shelf-0"),
+        _sheet((sx, h), (0.82, 0.82), (sz0, sz1), shelf, "shelf-1"),
+    ]
+    against = ("below", "+x")  # standing on a board, against the wall
+    rects += _block((sx, h), (0.0, 0.08), (sz0, sz1), shelf, "shelf-plinth", (*against, "-z", "+z"))
+    rects += _block((1.72, h), (0.45, 0.75), (-1.04, -0.7), paper, "books", against)
+    rects += _block((1.75, h), (0.82, 1.06), (-0.6, -0.36), paper, "box-files", against)
+    rects += _block((1.7, h), (0.08, 0.36), (-0.9, -0.5), paper, "storage-box", against)
+    # the cabinet, the sideboard and the lamp
+    cabinet, lacquer = _paint(21.0, 0.9, "cabinet"), _mirror(21.0, 0.88, "lacquer")
+    rects += _block((-1.95, -1.05), (0.0, 1.9), (1.5, h), cabinet, "cabinet", ("below", "+z"))
+    rects += _block((-h, -1.55), (0.0, 0.9), (-0.6, 0.6), lacquer, "sideboard", ("below", "-x"))
+    lamp = _paint(38.0, 0.9, "lamp")
+    rects += _block((0.35, 0.65), (2.4, top), (0.85, 1.15), lamp, "lamp", ("above",))
     return Scene(tuple(rects), 21.0 + K, 0.5)
 
 
@@ -253,25 +372,34 @@ def _machine_walk() -> tuple[Waypoint, ...]:
 
 
 def _room_walk() -> tuple[Waypoint, ...]:
-    """Round the room from inside, turning once, about 0.5-1 m from the walls: the window
-    (in to 1 m of it), the radiator (to 0.7 m), the east wall, the computer, the door, a look
-    up into a corner, the sideboard, a corner, the window from the left (the radiator seen in
-    it) and the ceiling, back to the start."""
+    """Round the room from inside as a person surveys it, 0.85-1.3 m from the walls, turning
+    once: from near the middle across to the window, in to 1.2 m of it, the radiator (to 0.7
+    m of it), the shelf unit, stooping to the desk and the computer, the door, the sideboard
+    and the cabinet, the window from the left (the radiator seen in it), up at the ceiling
+    lamp, and back to the start.
+
+    Every view holds a corner or furniture, and near the walls it looks down 15-40 degrees,
+    so the floor is in it too: a depth camera facing a bare wall close to it (a plane fixes
+    3 of the 6 degrees of freedom) loses its way, as a real one would, and a surveyor steps
+    back to keep context in view.
+    """
     at = Waypoint.looking_at
-    y = -1.4
+    y = -1.4  # chest height
     return (
-        at((0.2, y, -0.2), (0.8, -1.2, 2.0)),
-        at((0.6, y, 1.0), (0.8, -1.3, 2.0)),
-        at((1.2, -1.25, 0.9), (1.93, -0.575, 1.1)),
-        at((1.5, y, -0.5), (2.0, -1.2, -0.8)),
-        at((1.1, y, -1.5), (1.2, -0.6, -2.0)),
-        at((-0.1, y, -1.5), (-1.0, -1.0, -2.0)),
-        at((-1.3, y, -1.3), (-1.9, -2.4, -1.9)),
-        at((-1.5, y, -0.1), (-1.8, -0.8, 0.0)),
-        at((-1.4, y, 0.9), (-2.0, -1.2, 2.0)),
-        at((-0.8, y, 1.1), (0.75, -0.95, 2.0)),
-        at((-0.4, y, 0.3), (0.5, -2.5, 1.0)),
+        at((-0.3, y, -0.7), (0.8, -1.2, 2.15)),  # the north wall across the room
+        at((0.5, y, 0.95), (0.8, -1.0, 2.15)),  # the window in its reveal, the corner
+        at((1.05, -1.3, 0.75), (1.89, -0.6, 1.1)),  # the radiator, the corner
+        at((1.1, y, -0.2), (1.8, -0.7, -0.75)),  # the shelf unit
+        at((0.9, -1.1, -1.0), (1.6, -0.3, -1.7)),  # stooping: the desk and the computer
+        at((0.0, y, -1.15), (-1.0, -0.6, -2.0)),  # the door, the south-west corner
+        at((-0.85, y, -0.95), (-1.8, -0.45, -0.1)),  # the sideboard from its end
+        at((-0.8, y, 0.4), (-1.5, -0.5, 1.75)),  # the cabinet in the corner
+        at((-0.5, y, 1.0), (0.75, -0.95, 2.15)),  # the window from the left
+        at((0.1, y, 0.3), (0.5, -2.45, 1.0)),  # up at the lamp and the ceiling
     )
+
+
+SEEN_MAX_Z_M = 3.0  # the truth's view counts: surfaces seen within this depth (m)
 
 
 @dataclass(frozen=True)
@@ -474,7 +602,8 @@ def _seen(
     of FFC) at its time's pose, over the surface grid of seen_spacing_m."""
     points, _ = surface_samples(rig.scene.geometry, config.seen_spacing_m)
     cal = rig.calibration
-    limits = (rig.depth_model.min_z_m, rig.depth_model.max_z_m)
+    # seen within the depth a map fuses by default (thermodepth map --max-range-m 3)
+    limits = (rig.depth_model.min_z_m, min(rig.depth_model.max_z_m, SEEN_MAX_Z_M))
 
     def depth_from_world(t: float) -> RigidTransform:
         return path.pose_at(t).inverse()
