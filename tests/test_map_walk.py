@@ -142,3 +142,20 @@ def test_a_bad_trajectory_file_is_one_line_naming_its_line(walk: Path, tmp_path:
     )
     assert result.exit_code != 0
     assert f"{tum}:3: 7 fields; a TUM pose has 8" in result.output
+
+
+def test_a_trajectory_on_another_clock_is_one_line(walk: Path, tmp_path: Path) -> None:
+    truth = read_walk_truth(walk)
+    assert truth is not None
+    shifted = Trajectory(
+        truth.trajectory.times_s + 1000.0,
+        truth.trajectory.rotations,
+        truth.trajectory.translations_m,
+    )
+    tum = shifted.save_tum(tmp_path / "late.tum")
+    result = runner.invoke(
+        app, ["map", str(walk), "-o", str(tmp_path / "m"), "--trajectory", str(tum)]
+    )
+    assert result.exit_code != 0
+    assert "give the poses on the frames' clock" in result.output
+    assert len(result.output.strip().splitlines()) == 1

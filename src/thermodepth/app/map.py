@@ -203,14 +203,30 @@ def _trajectory(
     every depth frame."""
     if options.trajectory is not None:
         trajectory = Trajectory.load_tum(options.trajectory)
+        _check_clock(trajectory, walk, str(options.trajectory))
         return trajectory, {"from": str(options.trajectory), "poses": len(trajectory)}
     if walk.trajectory is not None:
         trajectory, told = walk.trajectory
+        _check_clock(trajectory, walk, told)
         return trajectory, {"from": told, "poses": len(trajectory)}
     cal = walk.calibration
     with reporter.task("odometry", len(walk.depth)) as advance:
         odo = depth_odometry(walk.depth_frames(), cal.depth, cal.depth_scale_m, progress=advance)
     return odo.trajectory, {"from": "depth odometry", **odo.summary()}
+
+
+def _check_clock(trajectory: Trajectory, walk: _Walk, where: str, slack_s: float = 0.5) -> None:
+    """InputError when the frames lie outside the poses' times (by more than ``slack_s``): a
+    trajectory on another clock would hold its end pose for the whole walk."""
+    times = [p.depth_time_s for p, _, _ in walk.pairs] + [
+        p.thermal_time_s for p, _, _ in walk.pairs
+    ]
+    t0, t1 = trajectory.times_s[0], trajectory.times_s[-1]
+    if min(times) < t0 - slack_s or max(times) > t1 + slack_s:
+        raise InputError(
+            f"{where}: poses from {t0:.3f} to {t1:.3f} s but frames from {min(times):.3f} to "
+            f"{max(times):.3f} s: give the poses on the frames' clock"
+        )
 
 
 def _depth_m(walk: _Walk, time_s: float, max_range_m: float) -> NDArray[np.float32]:
