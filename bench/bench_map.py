@@ -5,8 +5,11 @@ coverage, the hotspots, and the time against the walk's own duration on this mac
 
 Each walk is simulated once (1280x720 depth at 30 fps, the Lepton 3 at 8.7 Hz; machine 30 s,
 room 40 s, seed 0; kept in bench-out/walks/ for the next run), then mapped at 1 cm voxels with
-depth odometry (every depth frame) and the default fusion. The settings give the ambient
-temperature the thermographer measured in the scene (its air's). The rows' times are one run
+depth odometry (15 of the 30 fps) and the default fusion. The settings give the ambient
+temperature the thermographer measured in the scene (its air's) and the emissivity of most of
+the surface seen (its paint's: :func:`scene_emissivity`); surfaces of another emissivity read
+off by the difference, as they do with any one setting, and are left out of the temperature
+errors (metrics.py). The rows' times are one run
 each (median of one); numba's compile happens in an untimed 3 s walk first.
 """
 
@@ -18,9 +21,11 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from thermodepth.app.map import MapOptions, build_map
 from thermodepth.radiometry import ZERO_C_IN_K
-from thermodepth.sim.walk_truth import read_walk_truth
+from thermodepth.sim.walk_truth import WalkTruth, read_walk_truth
 from thermodepth.sim.walkaround import simulate_walkaround
 
 from .common import OUT, Timing, report
@@ -37,8 +42,19 @@ def walk(scene: str, duration_s: float, mode: str = "1280x720") -> Path:
     return path
 
 
+def scene_emissivity(truth: WalkTruth) -> float:
+    """The emissivity of most of the surface the thermal camera saw: what a thermographer
+    sets for a scene's paint (machine 0.94, room 0.93)."""
+    samples = truth.seen_samples()[0][truth.seen_thermal >= 1]
+    values, counts = np.unique(
+        np.round(truth.emissivity[truth.nearest(samples)[2]], 3), return_counts=True
+    )
+    return float(values[np.argmax(counts)])
+
+
 def mapped(path: Path, out: Path) -> dict[str, Any]:
-    """The map of a walk with the scene's air as the settings, its report."""
+    """The map of a walk with the scene's air and its paint's emissivity as the settings,
+    its report."""
     truth = read_walk_truth(path)
     assert truth is not None
     settings = out.parent / f"{out.name}.yaml"
@@ -46,6 +62,7 @@ def mapped(path: Path, out: Path) -> dict[str, Any]:
         "radiometry:\n"
         f"  ambient_temp_c: {truth.ambient_temp_k - ZERO_C_IN_K:.2f}\n"
         f"  humidity_pct: {truth.relative_humidity * 100:.1f}\n"
+        f"  emissivity: {scene_emissivity(truth)}\n"
     )
     return build_map(MapOptions(str(path), out, settings)).report
 

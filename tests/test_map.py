@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 pytest.importorskip("skimage", reason="the map needs the map extra (scikit-image)")
 
@@ -24,10 +25,12 @@ from thermodepth.mapping.fusion import (
     smear_px,
     view_weight,
 )
+from thermodepth.mapping.metrics import world_alignment
 from thermodepth.mapping.model import ThermalModel
 from thermodepth.mapping.volume import Volume, lens_for
 from thermodepth.radiometry import ZERO_C_IN_K, band_radiance, fresnel_emissivity
 from thermodepth.sim.scene import camera_pose
+from thermodepth.trajectory import Trajectory, rigid_alignment
 
 THERMAL = Intrinsics(160, 120, 150.0, 150.0, 79.5, 59.5, np.zeros(5))
 
@@ -55,6 +58,58 @@ def test_a_plane_seen_from_three_poses_meshes_where_it_is_facing_the_cameras() -
     a, b, c = (verts[faces[:, k]] for k in range(3))
     winding = np.einsum("ij,ij->i", np.cross(b - a, c - a), normals[faces].mean(1))
     assert np.mean(winding > 0) > 0.97  # triangles wound as their normals point
+
+
+def test_a_grid_turns_to_a_tilted_world_and_meshes_back_into_it() -> None:
+    # the plane z = 1 of the test above in a world turned 35 degrees about x and 20 about y
+    # (odometry's world is its first camera, tilted): the grid turns with the plane, so
+    # it is a fraction of the axis-aligned box, and the mesh comes back into the world
+    intr = Intrinsics(160, 120, 120.0, 120.0, 79.5, 59.5, np.zeros(5))
+    rays = pixel_rays(intr)
+    turn = RigidTransform(
+        Rotation.from_euler("xy", [35, 20], degrees=True).as_matrix(), np.zeros(3), "world",
+        "world",
+    )  # fmt: skip
+    ray = np.stack([rays[0], rays[1], np.ones_like(rays[0])], -1)
+    frames = []
+    for yaw in (-10.0, 0.0, 10.0):
+        pose = camera_pose(1.0, yaw_deg=yaw, target_m=(0.0, 0.0, 1.0))
+        d = ray @ pose.rotation.T
+        depth = ((1.0 - pose.translation_m[2]) / d[..., 2]).astype(np.float32)
+        frames.append((depth, turn @ pose))
+    points = np.concatenate([p.apply(ray * z[..., None]).reshape(-1, 3) for z, p in frames])
+    volume = Volume.of_points(points, 0.01)
+    lo, hi = points.min(0), points.max(0)
+    assert np.prod(volume.shape) < 0.5 * np.prod(np.ceil((hi - lo) / 0.01 + 9))
+    for depth, pose in frames:
+        volume.integrate(depth, intr, pose, rays, stride=2)
+    verts, faces, normals = volume.mesh()
+    assert len(faces) > 1000
+    local = turn.inverse().apply(verts)  # back to the plane's own world
+    inner = (np.abs(local[:, 0]) < 0.25) & (np.abs(local[:, 1]) < 0.2)
+    assert np.abs(local[inner, 2] - 1.0).max() < 0.002
+    assert np.all((normals[inner] @ turn.rotation)[:, 2] < -0.99)
+
+
+def test_a_straight_walk_is_aligned_by_its_poses_not_its_positions_alone() -> None:
+    # a walk along a straight line, its world turned 30 degrees about that line: positions
+    # alone cannot see the turn; whole poses can
+    n = 20
+    truth = Trajectory(
+        np.arange(n) * 0.1,
+        Rotation.from_euler("y", np.linspace(-20, 20, n)[:, None], degrees=True).as_matrix(),
+        np.stack([np.linspace(0, 0.5, n), np.zeros(n), np.zeros(n)], -1),
+    )
+    turn = Rotation.from_euler("x", 30, degrees=True).as_matrix()
+    shift = np.array([0.2, -0.1, 0.3])
+    estimate = Trajectory(
+        truth.times_s, turn.T @ truth.rotations, (truth.translations_m - shift) @ turn
+    )  # the truth's world = turn @ the estimate's + shift
+    align = world_alignment(estimate, truth)
+    np.testing.assert_allclose(align.rotation, turn, atol=1e-9)
+    np.testing.assert_allclose(align.translation_m, shift, atol=1e-9)
+    by_positions, _ = rigid_alignment(estimate.translations_m, truth.translations_m)
+    assert Rotation.from_matrix(by_positions.T @ turn).magnitude() > np.radians(10)
 
 
 def test_a_volume_too_large_is_one_line_naming_its_size() -> None:

@@ -30,7 +30,7 @@ from ..conditions import Radiometry
 from ..errors import FieldError, InputError
 from ..frames import DepthFrame, FramePair, Match
 from ..io.model import temperature_colours, write_model_glb, write_model_ply
-from ..io.recording import CorruptFrameError, Recording
+from ..io.recording import Recording
 from ..io.report import Report
 from ..mapping.fusion import (
     FUSION_METHODS,
@@ -65,8 +65,10 @@ class MapOptions:
 
     source: a recording or any source spec; out: the model's folder (created); settings: the
     settings YAML (radiometry, compensation, calibration, hotspot threshold; None: defaults);
-    trajectory: a TUM file of the depth camera's poses (None: depth odometry); voxel_m: the
-    voxel size; max_range_m: depth beyond it is not fused; fusion: the weights and method
+    trajectory: a TUM file of the depth camera's poses (None: depth odometry); odometry_fps:
+    odometry tracks every n-th depth frame of a faster camera (the poses between
+    interpolated; a slower camera's every frame); voxel_m: the voxel size; max_range_m:
+    depth beyond it is not fused; fusion: the weights and method
     (:class:`~thermodepth.mapping.fusion.FusionOptions`); every: use every n-th pair as a
     thermal view; hotspot_c: the hotspot threshold (None: the settings'); palette: the
     colours' scale; viewer_save: also write the model for rerun (``.rrd``); the source
@@ -77,6 +79,7 @@ class MapOptions:
     out: Path
     settings: Path | None = None
     trajectory: Path | None = None
+    odometry_fps: float = 15.0
     voxel_m: float = 0.01
     max_range_m: float = 3.0
     fusion: FusionOptions = field(default_factory=FusionOptions)
@@ -104,6 +107,8 @@ class MapOptions:
             raise FieldError("max_range_m", "must be > 0")
         if self.every < 1:
             raise FieldError("every", "must be >= 1")
+        if not self.odometry_fps > 0:
+            raise FieldError("odometry_fps", "must be > 0")
         if self.fusion.method not in FUSION_METHODS:
             raise FieldError(
                 "method", f"{self.fusion.method!r}: choose {', '.join(FUSION_METHODS)}"
@@ -116,12 +121,14 @@ class MapOptions:
 
 @dataclass
 class _Walk:
-    """What one read of the source keeps: every depth frame (time, compressed), and per
-    pair its depth frame's time, its thermal frame, telemetry and radiometry."""
+    """What one read of the source keeps: the depth frames (time, compressed): the pairs'
+    and those odometry tracks (``tracked``, their times; None: every one kept), and per pair
+    its depth frame's time, its thermal frame, telemetry and radiometry."""
 
     calibration: Calibration
     trajectory: tuple[Trajectory, str] | None = None  # the source's own (a bag's /tf)
     depth: dict[float, bytes] = field(default_factory=dict)
+    tracked: list[float] | None = None
     pairs: list[tuple[FramePair, Radiometry, bool]] = field(default_factory=list)
     shape: tuple[int, int] = (0, 0)
 
@@ -135,9 +142,25 @@ class _Walk:
         raw = np.frombuffer(_CODEC.decode(self.depth[time_s]), np.uint16)
         return raw.reshape(self.shape)
 
-    def depth_frames(self) -> Iterator[tuple[float, NDArray[np.uint16]]]:
-        for t in sorted(self.depth):
-            yield t, self.depth_at(t)
+    def tracked_times(self, fps: float) -> list[float]:
+        """The times of the depth frames odometry tracks: ``tracked``, else every n-th kept
+        one (:func:`_every_nth`)."""
+        if self.tracked is not None:
+            return self.tracked
+        kept = np.array(sorted(self.depth))
+        return [float(t) for t in kept[_every_nth(kept, fps)]]
+
+
+def _every_nth(times_s: NDArray[np.float64], fps: float) -> NDArray[np.bool_]:
+    """Which of the frames at ``times_s`` make a stream of about ``fps``: every n-th, n the
+    frames' own rate (median interval) over ``fps``, at least 1; and the last, so that every
+    pose is interpolated, none held past the end."""
+    keep = np.zeros(len(times_s), bool)
+    dt = float(np.nanmedian(np.diff(times_s))) if len(times_s) > 1 else 0.0
+    step = max(1, round(1.0 / (dt * fps))) if dt > 0 else 1
+    keep[::step] = True
+    keep[-1:] = True
+    return keep
 
 
 @dataclass
@@ -181,15 +204,15 @@ def _read(
     finally:
         src.close()
     kind, _, path = options.source.partition(":")
-    if kind == "recording":  # a replay gives its pairs; odometry wants every depth frame too
-        tell = warn or (lambda line: warnings.warn(line, stacklevel=2))
-        rec = Recording(path, warn=tell)
-        with reporter.task("reading the depth frames", rec.n_depth) as advance:
-            for row in range(rec.n_depth):
-                try:
-                    walk.keep_depth(rec.depth_frame(row))
-                except CorruptFrameError as exc:  # one line, and on with the next
-                    tell(f"{path}: depth row {row} skipped ({exc})")
+    odometry = options.trajectory is None and walk.trajectory is None
+    if kind == "recording" and odometry:  # a replay gives its pairs; odometry wants more
+        rec = Recording(path, warn=warn or (lambda line: warnings.warn(line, stacklevel=2)))
+        rows = np.flatnonzero(_every_nth(rec.depth_times_s(), options.odometry_fps))
+        walk.tracked = []
+        with reporter.task("reading the depth frames", len(rows)) as advance:
+            for frame in rec.depth_frames_at(rows.tolist()):
+                walk.keep_depth(frame)
+                walk.tracked.append(frame.time_s)
                 advance(1)
     if len(walk.pairs) < 2:
         raise InputError(f"{options.source}: {len(walk.pairs)} pairs; a map needs a walk")
@@ -210,8 +233,10 @@ def _trajectory(
         _check_clock(trajectory, walk, told)
         return trajectory, {"from": told, "poses": len(trajectory)}
     cal = walk.calibration
-    with reporter.task("odometry", len(walk.depth)) as advance:
-        odo = depth_odometry(walk.depth_frames(), cal.depth, cal.depth_scale_m, progress=advance)
+    times = walk.tracked_times(options.odometry_fps)
+    frames = ((t, walk.depth_at(t)) for t in times)
+    with reporter.task("odometry", len(times)) as advance:
+        odo = depth_odometry(frames, cal.depth, cal.depth_scale_m, progress=advance)
     return odo.trajectory, {"from": "depth odometry", **odo.summary()}
 
 
@@ -237,23 +262,24 @@ def _depth_m(walk: _Walk, time_s: float, max_range_m: float) -> NDArray[np.float
     return z
 
 
-def _bounds(
+def _sample_points(
     walk: _Walk, trajectory: Trajectory, options: MapOptions, rays: tuple[FloatArray, FloatArray]
-) -> tuple[FloatArray, FloatArray]:
-    """The box (world m) of every 16th pixel each way of the pairs' depth frames."""
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+) -> FloatArray:
+    """Every 16th pixel each way of the pairs' depth frames, within the range: (N, 3) world
+    m, the extent the grid must hold."""
     x, y = rays[0][::16, ::16], rays[1][::16, ::16]
+    scale = np.float32(walk.calibration.depth_scale_m)
+    points = []
     for pair, _, _ in walk.pairs:
-        z = _depth_m(walk, pair.depth_time_s, options.max_range_m)[::16, ::16]
-        ok = np.isfinite(z)
-        if not ok.any():
-            continue
+        raw = walk.depth_at(pair.depth_time_s)[::16, ::16]
+        z = raw * scale
+        ok = (raw > 0) & (z <= options.max_range_m)
         pts = np.stack([x[ok] * z[ok], y[ok] * z[ok], z[ok]], axis=-1)
-        world = trajectory.pose_at(pair.depth_time_s).apply(pts)
-        lo, hi = np.minimum(lo, world.min(0)), np.maximum(hi, world.max(0))
-    if not np.all(np.isfinite(lo)):
+        points.append(trajectory.pose_at(pair.depth_time_s).apply(pts))
+    world = np.concatenate(points)
+    if not len(world):
         raise InputError(f"{options.source}: no depth within {options.max_range_m} m")
-    return lo, hi
+    return world
 
 
 def _geometry(
@@ -262,7 +288,7 @@ def _geometry(
     """The TSDF of the pairs' depth frames at their poses."""
     cal = walk.calibration
     rays = pixel_rays(cal.depth)
-    volume = Volume.of_bounds(*_bounds(walk, trajectory, options, rays), options.voxel_m)
+    volume = Volume.of_points(_sample_points(walk, trajectory, options, rays), options.voxel_m)
     # enough depth points to find every block the surfaces cross at the nearest range
     stride = max(1, int(options.voxel_m * 4 * cal.depth.fx / 0.5 / 2))
     with reporter.task("fusing depth", len(walk.pairs)) as advance:

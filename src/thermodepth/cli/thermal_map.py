@@ -38,6 +38,13 @@ def map_cmd(
             "the frames' clock); default: depth odometry with loop closure."
         ),
     ] = None,
+    odometry_fps: Annotated[
+        float,
+        typer.Option(
+            help="Depth odometry tracks every n-th depth frame of a faster camera, the poses "
+            "between interpolated."
+        ),
+    ] = 15.0,
     voxel_m: Annotated[float, typer.Option(help="Voxel size, m.")] = 0.01,
     max_range_m: Annotated[float, typer.Option(help="Depth beyond this is not fused, m.")] = 3.0,
     method: Annotated[
@@ -84,6 +91,7 @@ def map_cmd(
         out,
         settings,
         trajectory,
+        odometry_fps,
         voxel_m,
         max_range_m,
         FusionOptions(max_angle_deg=max_angle_deg, method=method, directional=directional),

@@ -122,9 +122,12 @@ class VertexBlocks:
         side_m: float = 0.25,
     ) -> tuple[FloatArray, NDArray[np.int64], FloatArray, VertexBlocks]:
         """The mesh with its vertices renumbered cube by cube, and its blocks."""
-        keys = np.floor(vertices / side_m).astype(np.int64)
-        _, cube = np.unique(keys, axis=0, return_inverse=True)
-        cube = cube.reshape(-1)
+        cell = np.floor(vertices / side_m).astype(np.int64)
+        cell -= cell.min(axis=0) if len(cell) else 0
+        span = cell.max(axis=0) + 1 if len(cell) else np.ones(3, np.int64)
+        # one integer per cube: a 1-D unique is far faster than numpy's row-wise one
+        key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
+        _, cube = np.unique(key, return_inverse=True)
         order = np.argsort(cube, kind="stable")
         renumber = np.empty_like(order)
         renumber[order] = np.arange(len(order))

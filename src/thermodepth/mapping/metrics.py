@@ -1,8 +1,10 @@
 """A thermal model measured against the ground truth of a simulated walk.
 
 The model lives in its trajectory's world (depth odometry's: the first frame's camera); it is
-first moved into the truth's world by the rigid alignment of its trajectory to the true one
-(the ATE's, :func:`~thermodepth.trajectory.absolute_trajectory_error`). Then:
+first moved into the truth's world by the rigid motion that best fits its poses to the true
+ones (:func:`world_alignment`: the ATE's fit of positions alone leaves a short, nearly
+straight walk free to turn about its line, which at 2 m moves the model by centimetres).
+Then:
 
 - trajectory: ATE (RMSE of the aligned positions, m);
 - geometry: accuracy (each vertex's distance to the true surface), completeness (each true
@@ -34,7 +36,7 @@ from scipy.spatial import cKDTree
 
 from ..camera import RigidTransform
 from ..radiometry import ZERO_C_IN_K
-from ..trajectory import Trajectory, absolute_trajectory_error
+from ..trajectory import Trajectory, absolute_trajectory_error, rigid_alignment
 from .model import Hotspot3D, ThermalModel
 
 FloatArray = NDArray[np.float64]
@@ -91,7 +93,8 @@ def measure_map(
 ) -> dict[str, Any]:
     """The model against the truth (module docstring), as plain data."""
     ate = absolute_trajectory_error(trajectory, truth.trajectory)
-    align = ate.pop("truth_from_estimate")
+    del ate["truth_from_estimate"]
+    align = world_alignment(trajectory, truth.trajectory)
     verts = align.apply(model.vertices)
     dist, temp_k, rect = truth.nearest(verts)
     tree = cKDTree(verts)
@@ -142,6 +145,19 @@ def measure_map(
     if fused and plain and plain["mae_c"] > 0:
         out["temperature"]["mae_lower_than_plain"] = round(1 - fused["mae_c"] / plain["mae_c"], 4)
     return out
+
+
+def world_alignment(estimate: Trajectory, truth: Trajectory) -> RigidTransform:
+    """The estimate's world into the truth's: the rigid motion (:func:`rigid_alignment`)
+    that best fits each estimated pose's position and the points 1 m along its three axes to
+    the true pose's at the same time (whole poses, so a straight walk's turn about its line
+    is fixed too)."""
+    rot_true, pos_true = truth.poses_at(estimate.times_s)
+    ends = [np.zeros(3), *np.eye(3)]
+    src = np.concatenate([estimate.translations_m + estimate.rotations @ e for e in ends])
+    dst = np.concatenate([pos_true + rot_true @ e for e in ends])
+    rot, shift = rigid_alignment(src, dst)
+    return RigidTransform(rot, shift, "truth", "estimate")
 
 
 def _hotspot_errors(

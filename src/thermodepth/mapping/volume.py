@@ -10,14 +10,17 @@ meshed by marching cubes (Lewiner et al. 2003, scikit-image) over the cubes whos
 corners were all observed: an unobserved corner would otherwise make a false wall between
 what was seen behind a surface and what never was.
 
-Grid: voxel (i, j, k) has its centre at ``origin_m + (i, j, k) * voxel_m`` in the world frame
-(metres). tsdf is in units of ``trunc_m`` (-1 .. 1, positive in front of a surface, 1 where
-unobserved); weight counts the frames that observed a voxel.
+Grid: voxel (i, j, k) has its centre at ``origin_m + (i, j, k) * voxel_m`` in the grid's own
+frame (metres), which ``grid_from_world`` places in the world: :meth:`Volume.of_points` turns
+the grid to the smallest box round the points (a trajectory's world is often its first camera,
+tilted; a box square to that would hold twice the voxels). tsdf is in units of ``trunc_m``
+(-1 .. 1, positive in front of a surface, 1 where unobserved); weight counts the frames that
+observed a voxel.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numba
@@ -122,21 +125,48 @@ def _integrate_blocks(
 @dataclass(eq=False)
 class Volume:
     """A TSDF voxel grid (module docstring): origin_m (3,) the centre of voxel (0, 0, 0) in
-    the world; voxel_m the voxel side; tsdf and weight (nx, ny, nz) float32; trunc_m the
-    truncation distance (default 4 voxels)."""
+    the grid's frame; voxel_m the voxel side; tsdf and weight (nx, ny, nz) float32; trunc_m
+    the truncation distance (default 4 voxels); grid_from_world where the grid lies."""
 
     origin_m: FloatArray
     voxel_m: float
     tsdf: NDArray[np.float32]
     weight: NDArray[np.float32]
     trunc_m: float
+    grid_from_world: RigidTransform = field(
+        default_factory=lambda: RigidTransform.identity("grid", "world")
+    )
+
+    @classmethod
+    def of_points(cls, points_m: FloatArray, voxel_m: float, trunc_voxels: float = 4.0) -> Volume:
+        """An empty grid round points (N, 3) world m, turned to their smallest box (trimesh's
+        minimum-volume oriented box over their convex hull)."""
+        try:
+            import trimesh
+        except ImportError:
+            raise InputError(
+                "thermodepth map needs trimesh: pip install 'thermodepth[map]'"
+            ) from None
+        matrix, _ = trimesh.bounds.oriented_bounds(points_m)
+        rot = matrix[:3, :3]
+        if np.linalg.det(rot) < 0:  # a mirrored box: turn its last axis round
+            rot = rot * np.array([[1.0], [1.0], [-1.0]])
+        grid_from_world = RigidTransform(rot, np.zeros(3), "grid", "world")
+        local = grid_from_world.apply(points_m)
+        return cls.of_bounds(local.min(0), local.max(0), voxel_m, trunc_voxels, grid_from_world)
 
     @classmethod
     def of_bounds(
-        cls, lo_m: FloatArray, hi_m: FloatArray, voxel_m: float, trunc_voxels: float = 4.0
+        cls,
+        lo_m: FloatArray,
+        hi_m: FloatArray,
+        voxel_m: float,
+        trunc_voxels: float = 4.0,
+        grid_from_world: RigidTransform | None = None,
     ) -> Volume:
-        """An empty grid covering the box lo_m .. hi_m (world, m) with a margin of the
-        truncation distance; InputError if it would hold more than :data:`MAX_VOXELS`."""
+        """An empty grid covering the box lo_m .. hi_m (grid frame, m; the world's unless
+        ``grid_from_world`` is given) with a margin of the truncation distance; InputError
+        if it would hold more than :data:`MAX_VOXELS`."""
         if not voxel_m > 0:
             raise InputError(f"voxel size {voxel_m} m: must be > 0")
         trunc = trunc_voxels * voxel_m
@@ -156,6 +186,7 @@ class Volume:
             np.ones(shape, np.float32),
             np.zeros(shape, np.float32),
             float(trunc),
+            grid_from_world or RigidTransform.identity("grid", "world"),
         )
 
     @property
@@ -177,14 +208,15 @@ class Volume:
         nb = np.array([-(-n // BLOCK) for n in self.shape], np.int64)
         mark = np.zeros(tuple(nb), np.uint8)
         z = np.nan_to_num(depth_m, nan=0.0).astype(np.float32, copy=False)
-        rot = world_from_depth.rotation
-        t = world_from_depth.translation_m
+        grid_from_depth = self.grid_from_world @ world_from_depth
+        rot = grid_from_depth.rotation
+        t = grid_from_depth.translation_m
         _touched_blocks(
             z, rays[0], rays[1], rot, t, self.origin_m, self.voxel_m, self.trunc_m, stride, nb,
             mark, np.uint8(1),
         )  # fmt: skip
         blocks = np.argwhere(mark).astype(np.int64)
-        inv = world_from_depth.inverse()
+        inv = grid_from_depth.inverse()
         _integrate_blocks(
             blocks,
             z,
@@ -218,8 +250,9 @@ class Volume:
         cube = seen[:-1, :-1, :-1].copy()
         for di, dj, dk in np.ndindex(2, 2, 2):
             cube &= seen[di : di + cube.shape[0], dj : dj + cube.shape[1], dk : dk + cube.shape[2]]
+        # scikit-image reads mask[i, j, k] for the cube ending at voxel (i, j, k)
         mask = np.zeros_like(seen)
-        mask[:-1, :-1, :-1] = cube
+        mask[1:, 1:, 1:] = cube
         if not cube.any() or self.tsdf[seen].min() >= 0 or self.tsdf[seen].max() <= 0:
             return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3))
         verts, faces, normals, _ = marching_cubes(
@@ -229,10 +262,11 @@ class Volume:
         verts, faces, normals = _without_small_parts(verts, faces, normals, 2 * min_part_voxels)
         # scikit-image's normals point down the gradient's opposite here (into the surface,
         # towards negative tsdf) while its "descent" winding faces the free side: flip them
+        world_from_grid = self.grid_from_world.inverse()
         return (
-            verts.astype(np.float64) + self.origin_m,
+            world_from_grid.apply(verts.astype(np.float64) + self.origin_m),
             faces.astype(np.int64),
-            -normals.astype(np.float64),
+            -normals.astype(np.float64) @ world_from_grid.rotation.T,
         )
 
 

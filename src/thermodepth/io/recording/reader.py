@@ -22,6 +22,7 @@ from ...errors import InputError
 from ...frames import DepthFrame, FfcState, FramePair, Match, ThermalFrame, pair_of
 from .chunks import FrameChunks
 from .format import (
+    DEPTH_META,
     FORMAT,
     THERMAL_META,
     VERSIONS,
@@ -390,15 +391,20 @@ class Recording:
         camera holds: it has no pairs); unreadable ones skipped and counted as in
         :meth:`matches`, read ahead as there."""
 
-        def stream(name: str, n: int) -> Iterator[Any]:
-            found = _read_ahead(list(range(n)), lambda rows: self._frames_at(name, rows))
-            return self._readable(((f,) for f in found), f"{name} frame", _given)
-
         yield from heapq.merge(
-            stream("depth", self.n_depth),
-            stream("thermal", self.n_thermal),
+            self._stream("depth", range(self.n_depth)),
+            self._stream("thermal", range(self.n_thermal)),
             key=lambda f: f.time_s,
         )
+
+    def depth_frames_at(self, rows: Iterable[int]) -> Iterator[DepthFrame]:
+        """The depth frames at ``rows``, in that order, read ahead and skipped as in
+        :meth:`frames` (with one warning line per run of unreadable ones)."""
+        return self._stream("depth", rows)
+
+    def _stream(self, name: str, rows: Iterable[int]) -> Iterator[Any]:
+        found = _read_ahead(list(rows), lambda batch: self._frames_at(name, batch))
+        return self._readable(((f,) for f in found), f"{name} frame", _given)
 
     def pairs(self, start: int = 0, stop: int | None = None) -> Iterator[FramePair]:
         """The recorded FramePairs ``start`` to ``stop``, bit for bit (see :meth:`matches`)."""
@@ -414,6 +420,12 @@ class Recording:
             return np.zeros(len(rows), dtype=bool)
         state = thermal[np.clip(rows[:, 1], 0, len(thermal) - 1), THERMAL_META.index("ffc_state")]
         return np.asarray(state == FfcState.IN_PROGRESS)
+
+    def depth_times_s(self) -> NDArray[np.float64]:
+        """Per depth frame: its time (s; NaN where unknown), from the tables read on open."""
+        if not len(self._depth):
+            return np.zeros(0)
+        return np.asarray(self._depth.rows[:, DEPTH_META.index("time_s")], dtype=np.float64)
 
     def pair_times_s(self) -> NDArray[np.float64]:
         """Per row of the pairs table: the thermal frame's time (s; NaN where unknown), from
