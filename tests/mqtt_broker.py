@@ -132,14 +132,19 @@ class Collector:
         self.client = c
         assert self._subscribed.wait(5), "the broker did not acknowledge the subscription"
 
-    def drain(self, settle_s: float = 0.5) -> list[tuple[str, Any, bool]]:
-        """Everything received until nothing came for ``settle_s``."""
+    def drain(
+        self, settle_s: float = 0.5, max_s: float = float("inf")
+    ) -> list[tuple[str, Any, bool]]:
+        """Everything received until nothing came for ``settle_s``, or for ``max_s`` at most
+        (a stream that never pauses)."""
         out = []
-        while True:
+        end = time.monotonic() + max_s
+        while time.monotonic() < end:
             try:
                 out.append(self.messages.get(timeout=settle_s))
             except queue.Empty:
-                return out
+                break
+        return out
 
     def close(self) -> None:
         self.client.disconnect()

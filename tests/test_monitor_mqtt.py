@@ -213,7 +213,7 @@ def test_home_assistant_discovery(
     monitor = Monitor(load_config(path), lambda line: None)
     monitor.start()
     try:
-        wait_for(lambda: monitor.store.count() >= 6, 15)
+        wait_for(lambda: monitor.store.count() >= 6, 30)  # the first frames may compile
         time.sleep(1.5)
         first = discovery.drain(settle_s=0.5)
         # Home Assistant restarts and says so: every config again
@@ -225,7 +225,7 @@ def test_home_assistant_discovery(
         again = discovery.drain(settle_s=1.0)
         ha.disconnect()
         ha.loop_stop()
-        seen = states.drain(settle_s=0.5)
+        seen = states.drain(settle_s=0.5, max_s=1.0)  # the states never pause for long
     finally:
         monitor.stop()
     discovery.close()
