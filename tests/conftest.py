@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from collections.abc import Callable
 
 import pytest
+
+if os.environ.get("PYTEST_XDIST_WORKER"):  # `make test`: two workers, one core each
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 from thermodepth.evaluation import Generalisation, compensation_generalisation
 
@@ -31,6 +35,7 @@ def cli_process() -> CliProcess:
             capture_output=True,
             text=True,
             check=False,
+            env={**os.environ, "COLUMNS": "1000"},  # no line folded, however long its path
         )
 
     return run

@@ -147,7 +147,12 @@ def test_basic256sha256_with_the_servers_own_certificate(tmp_path: Path) -> None
     try:
         wait_for(lambda: monitor.runners["a"].status.frames > 3, 15)
         secure = f"Basic256Sha256,SignAndEncrypt,{cert},{key}"
-        got = asyncio.run(read(endpoint, ["a.Health", "a.Up"], security=secure))
+
+        def once_up() -> dict[str, Any] | None:  # the server's values follow the rig's status
+            got = asyncio.run(read(endpoint, ["a.Health", "a.Up"], security=secure))
+            return got if got["a.Up"].Value.Value else None
+
+        got = wait_for(once_up, 20, every_s=0.5)
         with pytest.raises(Exception):  # noqa: B017  no policy "none" offered
             asyncio.run(read(endpoint, ["a.Health"]))
     finally:

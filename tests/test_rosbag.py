@@ -280,7 +280,8 @@ def test_a_run_live_in_foxglove_read_as_its_websocket_client_reads_it() -> None:
     async def listen() -> tuple[dict[str, Any], bytes]:
         async with websockets.connect(url, subprotocols=["foxglove.sdk.v1"]) as ws:
             channels: dict[str, Any] = {}
-            while FUSED["cloud"] not in channels:
+            wanted = {FUSED["cloud"], FUSED["markers"], TOPICS["thermal"]}
+            while not wanted <= set(channels):  # each advertised when it first has a message
                 msg = json.loads(await asyncio.wait_for(ws.recv(), 10))
                 if msg["op"] == "advertise":
                     channels.update({c["topic"]: c for c in msg["channels"]})
