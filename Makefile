@@ -21,9 +21,10 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/thermodepth demo --out $(OUT)
 
-# two workers, each a file at a time (a file's fixtures made once) and numba on one thread
+# two workers, each a file at a time (a file's fixtures made once) and numba on one thread;
+# hypothesis draws the same examples every run (tests/conftest.py)
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --hypothesis-profile=ci
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

@@ -12,7 +12,13 @@ import pytest
 if os.environ.get("PYTEST_XDIST_WORKER"):  # `make test`: two workers, one core each
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
+from hypothesis import settings
+
 from thermodepth.evaluation import Generalisation, compensation_generalisation
+
+# `make test` (--hypothesis-profile=ci): the same examples every run, so that the suite that
+# guards main fails for a change, not for a draw; plain `pytest` explores anew each time
+settings.register_profile("ci", derandomize=True, database=None)
 
 
 @pytest.fixture(scope="session")

@@ -125,10 +125,10 @@ def test_a_board_of_the_size_given_is_never_refused_where_plain_opencv_finds_it(
         assert grid_continues(loaded, found.points_px, BOARD) == ()
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(view=views)
-def test_a_larger_board_is_refused(view: dict) -> None:  # type: ignore[type-arg]
-    # two columns and two rows more squares than the board given: OpenCV finds a sub-grid
+def larger_board_edges(view: dict) -> tuple[str, ...] | None:  # type: ignore[type-arg]
+    """The edges past which :func:`grid_continues` sees the pattern go on, for the board
+    found in a view of one with two columns and two rows more squares than the board given
+    (OpenCV finds a sub-grid); None where none is found."""
     levels = (1.0, 0.0, MARGIN[view["margin"]], 0.1)
     img = render(
         (BOARD.cols + 3, BOARD.rows + 3),
@@ -142,8 +142,28 @@ def test_a_larger_board_is_refused(view: dict) -> None:  # type: ignore[type-arg
     )
     loaded, _ = as_saved(img, view["palette"])
     found = detect_board(loaded, BOARD, stretch=True)
-    assume(found is not None)
-    assert grid_continues(loaded, found.points_px, BOARD) != ()
+    return None if found is None else grid_continues(loaded, found.points_px, BOARD)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(view=views)
+def test_a_larger_board_is_refused(view: dict) -> None:  # type: ignore[type-arg]
+    edges = larger_board_edges(view)
+    assume(edges is not None)
+    assert edges != ()
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known: a larger board tilted steeply at 6 px a square, its far squares 3-4 px, "
+    "is taken for the board given (hypothesis found it; sampling the cells through the "
+    "corners' homography fixes it but flags real, distorted boards)",
+)
+def test_a_larger_board_tilted_steeply_at_6_px_a_square_is_refused() -> None:
+    steep = {"margin_squares": 1.0, "margin": "first", "tilt": (0.0, 0.5859375),
+             "roll_deg": -15.0, "scale_px": 6.0, "blur_px": 1.0, "palette": None,
+             "seed": 1}  # fmt: skip
+    assert larger_board_edges(steep) != ()
 
 
 @pytest.mark.parametrize("palette", PALETTES)
