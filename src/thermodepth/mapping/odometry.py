@@ -71,6 +71,19 @@ _WEAK = 3e-3
 # -------------------------------------------------------------------------------------------
 
 
+@numba.njit(inline="always", **_JIT)
+def _put_mean(out, r, c, sx, sy, sz, n, keep):  # pragma: no cover - JIT
+    # out[r, c]: the block's mean point (sums sx, sy, sz of n points) where ``keep``, else 0
+    if keep:
+        out[r, c, 0] = sx / n
+        out[r, c, 1] = sy / n
+        out[r, c, 2] = sz / n
+    else:
+        out[r, c, 0] = 0.0
+        out[r, c, 1] = 0.0
+        out[r, c, 2] = 0.0
+
+
 @numba.njit(parallel=True, **_JIT)
 def _block_vertices(depth, scale, xs, ys, stride, max_z, jump, out):  # pragma: no cover - JIT
     # out (h, w, 3) float32: the mean of the valid points in each stride x stride block of the
@@ -105,14 +118,7 @@ def _block_vertices(depth, scale, xs, ys, stride, max_z, jump, out):  # pragma: 
                     n += 1
                     z_lo = min(z_lo, z)
                     z_hi = max(z_hi, z)
-            if n >= need and z_hi - z_lo <= jump * z_lo:
-                out[r, c, 0] = sx / n
-                out[r, c, 1] = sy / n
-                out[r, c, 2] = sz / n
-            else:
-                out[r, c, 0] = 0.0
-                out[r, c, 1] = 0.0
-                out[r, c, 2] = 0.0
+            _put_mean(out, r, c, sx, sy, sz, n, n >= need and z_hi - z_lo <= jump * z_lo)
 
 
 @numba.njit(parallel=True, **_JIT)
@@ -137,14 +143,7 @@ def _half_vertices(v, jump, out):  # pragma: no cover - JIT
                         n += 1
                         z_lo = min(z_lo, z)
                         z_hi = max(z_hi, z)
-            if n >= 2 and z_hi - z_lo <= jump * z_lo:
-                out[r, c, 0] = sx / n
-                out[r, c, 1] = sy / n
-                out[r, c, 2] = sz / n
-            else:
-                out[r, c, 0] = 0.0
-                out[r, c, 1] = 0.0
-                out[r, c, 2] = 0.0
+            _put_mean(out, r, c, sx, sy, sz, n, n >= 2 and z_hi - z_lo <= jump * z_lo)
 
 
 @numba.njit(parallel=True, **_JIT)
