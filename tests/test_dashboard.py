@@ -9,6 +9,7 @@ import json
 import zipfile
 from pathlib import Path
 from typing import Any
+from unittest.mock import patch
 
 import pytest
 
@@ -108,7 +109,13 @@ def test_evidence_by_event_id_and_nothing_by_a_path(running: Any, tmp_path: Path
         assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
         ply = c.get(f"/api/events/{event['id']}/cloud.ply")
         assert ply.content.startswith(b"ply\n")
-        clip = c.get(f"/api/events/{event['id']}/clip.zip")
+        clip_url = f"/api/events/{event['id']}/clip.zip"
+        folder_of_clip = folder / "store" / "clips" / event["clip"]
+        with patch.object(monitor.evidence, "active_folders", lambda: {folder_of_clip}):
+            busy = c.get(clip_url)  # still being recorded: not served torn
+        assert busy.status_code == 503 and busy.headers["retry-after"] == "2"
+        assert "still being recorded" in busy.json()["error"]
+        clip = wait_for(lambda: (r := c.get(clip_url)).status_code == 200 and r, 20)
         assert clip.headers["content-type"] == "application/zip"
         with zipfile.ZipFile(io.BytesIO(clip.content)) as z:
             z.extractall(tmp_path)

@@ -20,7 +20,8 @@ route                                      what
                                            ``rig``, ``level``, ``state``, ``before`` (an id)
 ``GET /api/events/ID``                     one event
 ``GET /api/events/ID/snapshot.png``,       its overlay, point cloud, and clip (the recording
-``cloud.ply``, ``clip.zip``                as one zip); 404 when not kept
+``cloud.ply``, ``clip.zip``                as one zip); 404 when not kept, 503 (Retry-After)
+                                           while the clip is still being recorded
 ``GET /api/rigs/RIG/overlay.jpg``,         the rig's latest overlay and thermal image
 ``thermal.png``                            (``width``: scaled down)
 ``GET /api/rigs/RIG/trend``                its readings over the last hour
@@ -50,7 +51,7 @@ from ..errors import InputError
 from ..io.measurements import jsonable
 from .auth import COOKIE, SESSION_S, Auth, Identity
 from .config import HttpConfig, read_token
-from .supervisor import AckRefusedError
+from .supervisor import AckRefusedError, ClipNotReadyError
 
 if TYPE_CHECKING:
     from starlette.applications import Starlette
@@ -261,6 +262,7 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
           200: {description: "the event's overlay (snapshot.png), point cloud (cloud.ply)
             or clip (clip.zip: the recording)"}
           404: {description: no such event, or its evidence is not kept}
+          503: {description: the clip is still being recorded (Retry-After says when to ask)}
         """
         you = who(request)
         if not isinstance(you, Identity):
@@ -268,7 +270,12 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         what = request.path_params["what"]
         if what not in EVIDENCE:
             return _error(f"expected one of {', '.join(EVIDENCE)}", 404)
-        path = monitor.evidence_file(request.path_params["id"], what)
+        try:
+            path = monitor.evidence_file(request.path_params["id"], what)
+        except ClipNotReadyError as exc:
+            busy = _error(f"{exc}: ask again in a few seconds", 503)
+            busy.headers["Retry-After"] = "2"
+            return busy
         if path is None:
             return _error("not kept", 404)
         name = f"event-{request.path_params['id']}-{what}"

@@ -39,7 +39,7 @@ from .publish import MonitorPublisher
 from .rig import RigSink, quantiles
 from .storage import CLIPS, Retention, free_bytes
 from .store import EventStore, counts_by_rig
-from .supervisor import AckRefusedError, RigRunner
+from .supervisor import AckRefusedError, ClipNotReadyError, RigRunner
 from .systemd import notify, watchdog_interval_s
 
 TICK_S = 0.25
@@ -565,8 +565,9 @@ class Monitor:
     def evidence_file(self, event_id: int, what: str) -> Path | None:
         """An event's kept evidence: ``snapshot.png`` (its clip's overlay), ``cloud.ply``
         (its point cloud), ``clip.zip`` (the folder of its recording, zipped by the
-        caller); None when it has none or it is not kept. Found by the event's id, never a
-        path from outside: a clip id that leads out of the clips' folder is none."""
+        caller; ClipNotReadyError while it is still being recorded); None when it has none or
+        it is not kept. Found by the event's id, never a path from outside: a clip id that
+        leads out of the clips' folder is none."""
         event = self.store.event(event_id)
         if event is None or what not in self.evidence_of(event):
             return None
@@ -575,6 +576,8 @@ class Monitor:
         if not folder.is_relative_to(root) or folder == root:
             return None
         path = folder / EVIDENCE_FILES[what]
+        if what == "clip.zip" and folder in self.evidence.active_folders():
+            raise ClipNotReadyError(f"event {event_id}: its clip is still being recorded")
         return path if path.exists() else None
 
     def evidence_of(self, event: dict[str, Any]) -> list[str]:

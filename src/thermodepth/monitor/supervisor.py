@@ -47,6 +47,11 @@ class AckRefusedError(Exception):
         self.status, self.message = status, message
 
 
+class ClipNotReadyError(Exception):
+    """An event's clip asked for while it is still being recorded (the seconds after the
+    trigger): served once it is closed, never torn."""
+
+
 class RigRunner:
     """One rig (module docstring). ``emit(sink, events, fused)``: where its events go;
     ``measured(sink, fused)``: told of each fused frame; ``log``: one line each of what
