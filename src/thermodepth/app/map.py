@@ -579,17 +579,20 @@ def _write_hotspots(path: Path, hotspots: list[Hotspot3D]) -> Path:
 def _pictures(
     out: Path, model: ThermalModel, rgb: NDArray[np.uint8], scale: dict[str, Any], up: FloatArray
 ) -> list[Path]:
-    """Four views of the model around what has a temperature (rendered offscreen, from 30
-    degrees above) with the colour scale."""
+    """Four views of the model (rendered offscreen, from 30 degrees above) with the colour
+    scale, framed on what stands out: the surface more than 3 C from the model's median (the
+    machine, not the hall round it), else all that has a temperature."""
     plt = pyplot()
     fig, grid = plt.subplots(
         2, 3, figsize=(12.5, 9), gridspec_kw={"width_ratios": [1, 1, 0.04]}, layout="constrained"
     )
     axes = grid[:, :2]
-    # framed on the surface that has a temperature: the subject, not the hall round it
     has = np.isfinite(model.temp_c)
-    subject = model.vertices[has] if has.sum() >= 100 else model.vertices
-    for ax, (name, view) in zip(axes.ravel(), orbit_views(subject, up), strict=True):
+    median_c = float(np.median(model.temp_c[has])) if has.any() else 0.0
+    stands_out = has & (np.abs(np.nan_to_num(model.temp_c, nan=median_c) - median_c) > 3.0)
+    chosen = next((s for s in (stands_out, has) if s.sum() >= 100), None)
+    subject = model.vertices if chosen is None else model.vertices[chosen]
+    for ax, (name, view) in zip(axes.ravel(), orbit_views(subject, up, margin=1.3), strict=True):
         ax.imshow(render(model.vertices, model.triangles, model.normals, rgb, view))
         ax.set_title(name)
         ax.axis("off")

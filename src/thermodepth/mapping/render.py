@@ -95,14 +95,15 @@ def render(
 
 
 def orbit_views(
-    vertices: FloatArray, up: FloatArray, n: int = 4, hfov_deg: float = 50.0
+    vertices: FloatArray, up: FloatArray, n: int = 4, hfov_deg: float = 50.0, margin: float = 1.05
 ) -> list[tuple[str, RigidTransform]]:
-    """``n`` cameras around the model's centre, 30 degrees above it, far enough for the
-    whole model to fit in ``hfov_deg``; named by their bearing."""
+    """``n`` cameras around the centre of ``vertices`` (what the pictures are of), 30 degrees
+    above it, far enough for them all to fit in ``hfov_deg`` with ``margin`` (1: touching);
+    named by their bearing."""
     lo, hi = np.percentile(vertices, [1, 99], axis=0)
     centre = (lo + hi) / 2
     radius = np.linalg.norm(hi - lo) / 2
-    dist = radius / np.sin(np.radians(hfov_deg) / 2) * 1.05
+    dist = radius / np.sin(np.radians(hfov_deg) / 2) * margin
     up = np.asarray(up, float) / np.linalg.norm(up)
     side = np.cross(up, [1.0, 0.0, 0.0])
     if np.linalg.norm(side) < 1e-6:
