@@ -21,6 +21,7 @@ naming which, and ``condition`` saying what was seen.
 
 from __future__ import annotations
 
+import itertools
 from collections import deque
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -166,7 +167,10 @@ class SensorWatch:
         if self._closed_since is not None and now_s - self._closed_since >= c.shutter_max_s:
             return True, f"shutter closed for {now_s - self._closed_since:.1f} s"
         span = history[-1][0] - history[0][0]
-        share = sum(s for _, s in history) / len(history)
+        # the share of the time, not of the frames: frames that come late or are dropped
+        # (a busy machine) would tilt a count towards the cheap frozen ones
+        closed_s = sum(t1 - t0 for (t0, shut), (t1, _) in itertools.pairwise(history) if shut)
+        share = closed_s / span if span > 0 else 0.0
         if span >= 0.5 * c.shutter_window_s and share > c.shutter_max_share:
             return True, f"shutter closed {100 * share:.0f}% of the last {span:.0f} s"
         return False, ""
