@@ -147,9 +147,10 @@ def test_the_overview_shows_every_rig_live_and_an_alarm_within_2_s(plant: Any) -
     # the overlays: each card's picture loaded, 640 px wide, and a new one each time asked
     for rig in "ab":
         img = f"section.card[data-rig={rig}] img.live"
-        first = wait_for(lambda img=img: picture_sum(driver, img), 5)
+        # (a busy machine may take seconds to hand chromium a picture: the bounds are loose)
+        first = wait_for(lambda img=img: picture_sum(driver, img), 15)
         assert first[0] == 640
-        wait_for(lambda img=img, first=first: picture_sum(driver, img) not in (None, first), 3)
+        wait_for(lambda img=img, first=first: picture_sum(driver, img) not in (None, first), 10)
     assert 60 < float(texts(driver, "section.card[data-rig=a] .hottest", "data-hottest")[0]) < 75
     assert texts(driver, "section.card[data-rig=b] .state")[0].lower() == "ok"
 
