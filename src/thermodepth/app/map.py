@@ -254,9 +254,10 @@ def _check_clock(trajectory: Trajectory, walk: _Walk, where: str, slack_s: float
         )
 
 
-def _depth_m(walk: _Walk, time_s: float, max_range_m: float) -> NDArray[np.float32]:
-    """A kept depth frame in metres, NaN where none or beyond the range."""
-    raw = walk.depth_at(time_s)
+def _depth_m(walk: _Walk, time_s: float, max_range_m: float, every: int = 1) -> NDArray[np.float32]:
+    """A kept depth frame in metres (every ``every``-th pixel each way), NaN where none or
+    beyond the range."""
+    raw = walk.depth_at(time_s)[::every, ::every]
     z = raw.astype(np.float32) * np.float32(walk.calibration.depth_scale_m)
     z[(raw == 0) | (z > max_range_m)] = np.nan
     return z
@@ -268,12 +269,10 @@ def _sample_points(
     """Every 16th pixel each way of the pairs' depth frames, within the range: (N, 3) world
     m, the extent the grid must hold."""
     x, y = rays[0][::16, ::16], rays[1][::16, ::16]
-    scale = np.float32(walk.calibration.depth_scale_m)
     points = []
     for pair, _, _ in walk.pairs:
-        raw = walk.depth_at(pair.depth_time_s)[::16, ::16]
-        z = raw * scale
-        ok = (raw > 0) & (z <= options.max_range_m)
+        z = _depth_m(walk, pair.depth_time_s, options.max_range_m, every=16)
+        ok = np.isfinite(z)
         pts = np.stack([x[ok] * z[ok], y[ok] * z[ok], z[ok]], axis=-1)
         points.append(trajectory.pose_at(pair.depth_time_s).apply(pts))
     world = np.concatenate(points)
