@@ -5,6 +5,7 @@ measured by ``bench/bench_map.py``.)"""
 
 from __future__ import annotations
 
+import csv
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -84,8 +85,18 @@ def test_the_model_files_hold_what_the_report_says(mapped: dict) -> None:
     assert np.all(ply["views"][has] >= 1) and np.all(ply["views"][~has] == 0)
     scale = report["temperature_scale"]
     assert scale["min_c"] < 23.0 < scale["max_c"]  # the hall at 22 C is in the picture
-    rows = (out / "hotspots.csv").read_text().splitlines()
-    assert len(rows) == len(report["hotspots"]) + 1
+    assert report["hotspots"]  # the machine's hot parts: the table below says something
+    with open(out / "hotspots.csv", newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(report["hotspots"])
+    for rank, (row, spot) in enumerate(zip(rows, report["hotspots"], strict=True), 1):
+        assert int(row["rank"]) == rank and int(row["vertices"]) == spot["vertices"]
+        assert int(row["peak_views"]) == spot["peak_views"]
+        for name in ("peak_c", "fused_peak_c", "mean_c", "area_cm2", "extent_m"):
+            assert float(row[name]) == pytest.approx(spot[name], nan_ok=True), name
+        for i, axis in enumerate("xyz"):
+            assert float(row[f"centre_{axis}_m"]) == spot["centre_m"][i]
+            assert float(row[f"peak_{axis}_m"]) == spot["peak_m"][i]
     trajectory = Trajectory.load_tum(out / "trajectory.tum")
     assert len(trajectory) == report["trajectory"]["poses"]
 

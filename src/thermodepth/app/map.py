@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..camera import RigidTransform, pixel_rays
 from ..conditions import Radiometry
+from ..csvfile import write_csv
 from ..errors import FieldError, InputError
 from ..frames import DepthFrame, FramePair, Match
 from ..io.model import temperature_colours, write_model_glb, write_model_ply
@@ -546,33 +547,36 @@ def _up(trajectory: Trajectory) -> FloatArray:
     return up / max(float(np.linalg.norm(up)), 1e-9)
 
 
+HOTSPOT_FIELDS = (
+    "rank",
+    "peak_c",
+    "peak_views",
+    "fused_peak_c",
+    "mean_c",
+    "centre_x_m",
+    "centre_y_m",
+    "centre_z_m",
+    "peak_x_m",
+    "peak_y_m",
+    "peak_z_m",
+    "area_cm2",
+    "extent_m",
+    "vertices",
+)
+"""The columns of the map's ``hotspots.csv``: the report's hotspots, points one axis a column."""
+
+
 def _write_hotspots(path: Path, hotspots: list[Hotspot3D]) -> Path:
-    """One row per hotspot: peak and centre (world m), area, extent, temperatures."""
-    rows = [
-        "rank,peak_c,peak_views,fused_peak_c,mean_c,centre_x_m,centre_y_m,centre_z_m,"
-        "peak_x_m,peak_y_m,peak_z_m,area_cm2,extent_m,vertices"
-    ]
-    for k, h in enumerate(hotspots, 1):
+    """One row per hotspot, hottest first: peak and centre (world m), area, extent,
+    temperatures, as ``map_report.json`` has them."""
+    rows = []
+    for rank, h in enumerate(hotspots, 1):
         d = h.as_dict()
-        rows.append(
-            ",".join(
-                str(v)
-                for v in (
-                    k,
-                    d["peak_c"],
-                    d["mean_c"],
-                    d["peak_views"],
-                    d["fused_peak_c"],
-                    *d["centre_m"],
-                    *d["peak_m"],
-                    d["area_cm2"],
-                    d["extent_m"],
-                    d["vertices"],
-                )
-            )
-        )
-    path.write_text("\n".join(rows) + "\n")
-    return path
+        centre, peak = d.pop("centre_m"), d.pop("peak_m")
+        d.update({f"centre_{a}_m": v for a, v in zip("xyz", centre, strict=True)})
+        d.update({f"peak_{a}_m": v for a, v in zip("xyz", peak, strict=True)})
+        rows.append({"rank": rank, **d})
+    return write_csv(path, HOTSPOT_FIELDS, rows)
 
 
 def _pictures(
