@@ -356,15 +356,15 @@ def test_frame_lines_are_what_the_writer_writes(tmp_path: Path) -> None:
     rig = Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0))
     pipe = Pipeline(Settings.model_validate({"hotspots": {"threshold_c": 50}}), rig.calibration)
     fused = next(f for f in map(pipe.process, rig.frames(5)) if not f.in_ffc)
-    from thermodepth.io.measurements import HOTSPOTS_HEADER, MeasurementWriter
+    from thermodepth.io.measurements import MeasurementWriter
 
     with MeasurementWriter(tmp_path) as w:
         w.write(fused)
     lines = FrameLines.of(fused)
-    assert lines.hotspots and lines.hotspots[0].endswith("\r\n")
-    assert (tmp_path / FILES[2]).read_bytes() == (
-        HOTSPOTS_HEADER + "".join(lines.hotspots)
-    ).encode()
+    assert lines.hotspots
+    assert read_csv(tmp_path / FILES[2]) == [
+        {k: str(v) for k, v in row.items()} for row in lines.hotspots
+    ]
     assert (tmp_path / FILES[0]).read_text() == lines.frame
 
 

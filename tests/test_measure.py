@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import csv
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -147,3 +151,39 @@ def test_alarm_trips_after_n_frames_and_clears() -> None:
     assert kinds[1] == [] and kinds[2] == [("alarm", "hot")]  # the third frame in a row
     assert kinds[3] == [] and kinds[4] == [("clear", "hot")] and kinds[5] == []
     assert events[2][0]["hotspot"]["max_c"] == 70.0 and events[2][0]["frame"] == 2
+
+
+def test_the_hotspot_table_says_what_the_measurement_lines_say(tmp_path: Path) -> None:
+    """hotspots.csv read by name (csv.DictReader) against measurements.jsonl: every hotspot
+    of every frame, each column the field of the same name, to the digits the table keeps."""
+    from thermodepth.io.measurements import FILES, HOTSPOT_COLUMNS, MeasurementWriter
+    from thermodepth.pipeline import Pipeline, Settings
+    from thermodepth.sim import Rig, camera_pose, plate_scene
+
+    rig = Rig(plate_scene(chip_temp_c=70.0), camera_pose(1.0))
+    pipe = Pipeline(Settings.model_validate({"hotspots": {"threshold_c": 35}}), rig.calibration)
+    with MeasurementWriter(tmp_path) as writer:
+        for fused in map(pipe.process, rig.frames(6)):
+            writer.write(fused)
+    frames = [json.loads(x) for x in (tmp_path / FILES[0]).read_text().splitlines()]
+    with open(tmp_path / FILES[2], newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        rows = list(reader)
+    assert tuple(reader.fieldnames or ()) == HOTSPOT_COLUMNS
+    spots = [(f, h) for f in frames for h in f["hotspots"]]
+    assert len(spots) >= 3  # the plate, hot, in every frame after the power-on shutter
+    assert len(rows) == len(spots)
+    for row, (frame, h) in zip(rows, spots, strict=True):
+        assert int(row["frame"]) == frame["frame"] and int(row["label"]) == h["label"]
+        assert float(row["thermal_time_s"]) == pytest.approx(frame["thermal_time_s"], abs=1e-4)
+        assert float(row["vox_temp_c"]) == pytest.approx(frame["vox_temp_c"], abs=0.005)
+        for name in ("max_c", "mean_c"):
+            assert float(row[name]) == pytest.approx(h[name], abs=5e-4), name
+        for name, value in zip(("x_m", "y_m", "z_m"), h["centroid_m"], strict=True):
+            assert float(row[name]) == pytest.approx(value, abs=5e-5), name
+        assert float(row["distance_m"]) == pytest.approx(h["distance_m"], abs=5e-5)
+        assert float(row["area_m2"]) == pytest.approx(h["area_m2"], rel=1e-5)
+        assert float(row["power_w"]) == pytest.approx(h["power_w"], rel=1e-3)
+        assert int(row["thermal_px"]) == h["thermal_px"]
+        assert bool(int(row["resolvable"])) == h["resolvable"]
+        assert int(row["flags"]) == h["flags"]

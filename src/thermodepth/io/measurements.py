@@ -3,15 +3,14 @@
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 import os
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from ..csvfile import CsvWriter
 
 FILES = ("measurements.jsonl", "alarms.jsonl", "hotspots.csv")
 """What a measurements folder holds: one JSON line per frame, one per alarm event, and one
@@ -48,51 +47,40 @@ def jsonable(x: Any) -> Any:
     return value
 
 
-def csv_line(row: Sequence[Any]) -> str:
-    """One CSV row as text, as :mod:`csv`'s default dialect writes it (ended by ``\\r\\n``)."""
-    buf = io.StringIO()
-    csv.writer(buf).writerow(row)
-    return buf.getvalue()
-
-
-HOTSPOTS_HEADER = csv_line(HOTSPOT_COLUMNS)
-
-
 @dataclass(frozen=True)
 class FrameLines:
-    """What one fused frame adds to each file, as text: its ``measurements.jsonl`` line, its
-    ``alarms.jsonl`` lines and its ``hotspots.csv`` rows (each ended by its newline)."""
+    """What one fused frame adds to each file: its ``measurements.jsonl`` line and its
+    ``alarms.jsonl`` lines as text (each ended by its newline), and its ``hotspots.csv`` rows
+    (:data:`HOTSPOT_COLUMNS` -> the cell's text)."""
 
     frame: str
     alarms: list[str]
-    hotspots: list[str]
+    hotspots: list[dict[str, str | int]]
 
     @classmethod
     def of(cls, fused: Any) -> FrameLines:
         """The lines of a :class:`~thermodepth.pipeline.FusedFrame`."""
-        rows = []
+        rows: list[dict[str, str | int]] = []
         for h in fused.hotspots:
             x, y, z = h.centroid_m
             rows.append(
-                csv_line(
-                    [
-                        fused.index,
-                        f"{fused.thermal_time_s:.4f}",
-                        f"{fused.vox_temp_c:.2f}",
-                        h.label,
-                        f"{h.max_c:.3f}",
-                        f"{h.mean_c:.3f}",
-                        f"{x:.4f}",
-                        f"{y:.4f}",
-                        f"{z:.4f}",
-                        f"{h.distance_m:.4f}",
-                        f"{h.area_m2:.6g}",
-                        h.thermal_px,
-                        int(h.resolvable),
-                        f"{h.power_w:.4g}",
-                        h.flags,
-                    ]
-                )
+                {
+                    "frame": fused.index,
+                    "thermal_time_s": f"{fused.thermal_time_s:.4f}",
+                    "vox_temp_c": f"{fused.vox_temp_c:.2f}",
+                    "label": h.label,
+                    "max_c": f"{h.max_c:.3f}",
+                    "mean_c": f"{h.mean_c:.3f}",
+                    "x_m": f"{x:.4f}",
+                    "y_m": f"{y:.4f}",
+                    "z_m": f"{z:.4f}",
+                    "distance_m": f"{h.distance_m:.4f}",
+                    "area_m2": f"{h.area_m2:.6g}",
+                    "thermal_px": h.thermal_px,
+                    "resolvable": int(h.resolvable),
+                    "power_w": f"{h.power_w:.4g}",
+                    "flags": h.flags,
+                }
             )
         return cls(
             json.dumps(jsonable(fused.summary())) + "\n",
@@ -114,7 +102,8 @@ class MeasurementWriter:
         self._frames = open(frames, "w", encoding="utf-8")  # noqa: SIM115
         self._alarms = open(alarms, "w", encoding="utf-8")  # noqa: SIM115
         self._hotspots = open(hotspots, "w", newline="", encoding="utf-8")  # noqa: SIM115
-        self._hotspots.write(HOTSPOTS_HEADER)
+        self._table = CsvWriter(self._hotspots, HOTSPOT_COLUMNS)
+        self._table.header()
 
     def write(self, fused: Any) -> None:
         """One fused frame (a :class:`~thermodepth.pipeline.FusedFrame`)."""
@@ -124,7 +113,7 @@ class MeasurementWriter:
         """One frame's lines (:class:`FrameLines`)."""
         self._frames.write(lines.frame)
         self._alarms.writelines(lines.alarms)
-        self._hotspots.writelines(lines.hotspots)
+        self._table.rows(lines.hotspots)
         # whole lines on disk as each frame ends: a killed run keeps every frame it measured
         for f in (self._frames, self._alarms, self._hotspots):
             f.flush()
