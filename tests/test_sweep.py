@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import itertools
 import string
 import tempfile
@@ -13,7 +14,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from thermodepth.errors import InputError
-from thermodepth.sweep import REQUIRED, SweepTable, read_sweep_csv, write_sweep_csv
+from thermodepth.sweep import (
+    REQUIRED,
+    SweepAppender,
+    SweepTable,
+    read_sweep_csv,
+    write_sweep_csv,
+)
 
 # what each required column can hold: distances up to 1000 m, temperatures above 0 K to 5000 C
 distance = st.floats(-1e6, 1000, allow_nan=False, allow_infinity=False)
@@ -143,3 +150,58 @@ def test_a_repeated_header_name_is_one_line() -> None:
         assert str(exc) == f"{path}: header names distance_m more than once"
     else:
         raise AssertionError("a repeated column was accepted")
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.tuples(distance, temp, temp, temp, st.integers(1, 50)), min_size=1, max_size=8),
+    st.permutations([*REQUIRED, "n", "note"]),
+)
+def test_each_cell_is_under_its_own_header_name(
+    rows: list[tuple[float, float, float, float, int]], order: list[str]
+) -> None:
+    """Read by name (csv.DictReader), every cell of a written table is the value of its
+    column, in whatever order the columns are written."""
+    arr = np.array([r[:4] for r in rows])
+    columns = {name: arr[:, i] for i, name in enumerate(REQUIRED)}
+    columns["n"] = np.array([float(r[4]) for r in rows])
+    notes = [f"row {i}" for i in range(len(rows))]
+    table = SweepTable(columns, {"note": notes}, order=order)
+    path = _tmp("")
+    write_sweep_csv(path, table, digits=None)
+    with path.open(newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        back = list(reader)
+    assert reader.fieldnames == order
+    assert [r["note"] for r in back] == notes
+    for name in columns:
+        assert [float(r[name]) for r in back] == list(columns[name]), name
+
+
+def test_appended_rows_go_under_the_files_own_header(tmp_path: Path) -> None:
+    """A new file's header is the columns given; a file appended to keeps its own order,
+    a column it lacks left out, one a row lacks left empty."""
+    row = {"distance_m": 1.5, "vox_temp_c": 30.25, "measured_temp_c": 38.5,
+           "reference_temp_c": 39.0, "n": 4.0, "frame": 12.0}  # fmt: skip
+    new = tmp_path / "new.csv"
+    appender = SweepAppender(new, [*REQUIRED, "n", "frame"])
+    appender.write(row)
+    appender.write({**row, "distance_m": 2.0})
+    appender.close()
+    with new.open(newline="", encoding="utf-8") as f:
+        assert list(csv.DictReader(f)) == [
+            {**{k: f"{v:g}" for k, v in row.items()}, "n": "4", "frame": "12"},
+            {**{k: f"{v:g}" for k, v in row.items()}, "n": "4", "frame": "12", "distance_m": "2"},
+        ]
+    theirs = tmp_path / "theirs.csv"
+    theirs.write_text(
+        "note,reference_temp_c,measured_temp_c,vox_temp_c,distance_m\r\nx,39,38,30,1\r\n"
+    )
+    appender = SweepAppender(theirs, [*REQUIRED, "n", "frame"], append=True)
+    appender.write(row)
+    appender.close()
+    with theirs.open(newline="", encoding="utf-8") as f:
+        back = list(csv.DictReader(f))
+    assert back[1] == {"note": "", "reference_temp_c": "39", "measured_temp_c": "38.5",
+                       "vox_temp_c": "30.25", "distance_m": "1.5"}  # fmt: skip
+    assert read_sweep_csv(theirs).names == ["note", *reversed(REQUIRED)]

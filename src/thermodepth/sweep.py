@@ -34,11 +34,11 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .csvfile import CsvWriter, write_csv
 from .errors import FieldError, InputError, read_text, repeated
 from .radiometry import MAX_DISTANCE_M, TEMP_LIMITS_C
 
@@ -223,17 +223,16 @@ def write_sweep_csv(path: str | Path, table: SweepTable, digits: int | None = 6)
     table read and written again keeps every value)."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    names = table.names
-    cols: list[Sequence[object]] = []
-    for name in names:
-        if name in table.columns:
-            cols.append([format_cell(name, v, digits) for v in table.columns[name]])
-        else:
-            cols.append(table.extra[name])
-    with p.open("w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(names)
-        w.writerows(zip(*cols, strict=True))
+
+    def row(i: int) -> dict[str, str]:
+        return {
+            name: format_cell(name, table.columns[name][i], digits)
+            if name in table.columns
+            else table.extra[name][i]
+            for name in table.names
+        }
+
+    write_csv(p, table.names, (row(i) for i in range(len(table))))
 
 
 COUNT_COLUMNS = ("n", "frame", "target_px")
@@ -257,9 +256,10 @@ class SweepAppender:
     """Sweep rows written as they are made, each flushed and synced to disk: a run killed at
     any moment keeps every completed row.
 
-    A new file gets ``columns`` as its header, written with the first row (no rows, no file).
-    With ``append`` an existing file keeps its own header, which must hold the required
-    columns; each row is written in that order (cells of columns a row lacks left empty).
+    A new file gets ``columns`` as its header, written with the first row (no rows, no file);
+    each row names every one of them. With ``append`` an existing file keeps its own header,
+    which must hold the required columns; each row is written in that order (cells of columns
+    a row lacks left empty, columns the header lacks not written).
     Without ``append`` an existing file is refused. :meth:`check` says so before any camera
     starts (a FieldError naming ``out``, or an InputError naming the file).
     """
@@ -270,7 +270,7 @@ class SweepAppender:
         self.append = append
         self.rows = 0
         self._file: io.TextIOWrapper | None = None
-        self._writer: Any = None
+        self._writer: CsvWriter | None = None
 
     def check(self) -> None:
         """Refuse an output that exists without ``append``, and with it one whose header
@@ -300,15 +300,16 @@ class SweepAppender:
 
     def write(self, row: dict[str, float]) -> None:
         """Write one row (column -> value) and push it to the disk."""
-        if self._file is None:
+        if self._file is None or self._writer is None:
             self.check()
             new = not self.path.exists()
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = self.path.open("a", newline="", encoding="utf-8")
-            self._writer = csv.writer(self._file)
+            # a file appended to keeps its header: a column it lacks is not written
+            self._writer = CsvWriter(self._file, self.columns, fill=not new)
             if new:
-                self._writer.writerow(self.columns)
-        self._writer.writerow([format_cell(c, row[c]) if c in row else "" for c in self.columns])
+                self._writer.header()
+        self._writer.row({c: format_cell(c, v) for c, v in row.items()})
         self._file.flush()
         os.fsync(self._file.fileno())
         self.rows += 1
