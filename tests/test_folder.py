@@ -58,6 +58,26 @@ def test_a_folder_of_a_simulator_run_measures_as_the_run(
     assert "plate" in measurements(tmp_path / "sim")[-1]  # after the power-on shutter
 
 
+def test_frames_csv_read_by_name_is_the_pairs_written(tmp_path: Path) -> None:
+    """Each column of frames.csv, read by its header name, holds that field of its pair."""
+    rig = Rig.of_cameras(plate_scene(chip_temp_c=70.0), camera_pose(1.0), "lepton3", "848x480")
+    pairs = list(rig.frames(4))
+    folder = write_folder(tmp_path / "rig", rig.calibration, pairs)
+    with (folder / "frames.csv").open(newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(pairs) == 4
+    assert any(p.telemetry.in_ffc for p in pairs) and not all(p.telemetry.in_ffc for p in pairs)
+    for row, pair in zip(rows, pairs, strict=True):
+        assert row["depth"] == f"depth/{pair.index:06d}.png"
+        assert row["thermal"] == f"thermal/{pair.index:06d}.png"
+        assert float(row["depth_time_s"]) == pair.depth_time_s
+        assert float(row["thermal_time_s"]) == pair.thermal_time_s
+        assert pair.depth_time_s != pair.thermal_time_s  # a swap of the two would show
+        assert float(row["fpa_temp_c"]) == pair.telemetry.fpa_temp_c
+        assert int(row["in_ffc"]) == pair.telemetry.in_ffc
+        assert row["ir"] == ("" if pair.ir is None else f"ir/{pair.index:06d}.png")
+
+
 def test_rows_that_cannot_be_read_are_one_line_each(tmp_path: Path) -> None:
     folder = sim_folder(tmp_path)
     rows = list(csv.DictReader((folder / "frames.csv").open()))

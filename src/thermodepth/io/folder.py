@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..calibration import Calibration
+from ..csvfile import CsvWriter
 from ..errors import InputError, read_text
 from ..frames import FfcState, FramePair, Telemetry, thermal_output
 from ..radiometry import ZERO_C_IN_K, ThermalOutput
@@ -213,8 +214,8 @@ def write_folder(out: str | Path, calibration: Calibration, pairs: Iterable[Fram
     (folder / "thermal").mkdir(exist_ok=True)
     output = calibration.thermal_output
     with (folder / FRAMES_FILE).open("w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow([*REQUIRED, *OPTIONAL])
+        table = CsvWriter(fh, (*REQUIRED, *OPTIONAL))
+        table.header()
         for pair in pairs:
             name = f"{pair.index:06d}.png"
             cv2.imwrite(str(folder / "depth" / name), pair.depth)
@@ -224,16 +225,16 @@ def write_folder(out: str | Path, calibration: Calibration, pairs: Iterable[Fram
                 cv2.imwrite(str(folder / "ir" / name), pair.ir)
             output = thermal_output(pair.telemetry, calibration.thermal_output)
             fpa = pair.telemetry.fpa_temp_c
-            w.writerow(
-                [
-                    f"depth/{name}",
-                    f"thermal/{name}",
-                    repr(pair.depth_time_s),
-                    repr(pair.thermal_time_s),
-                    "" if math.isnan(fpa) else repr(fpa),
-                    int(pair.telemetry.in_ffc),
-                    "" if pair.ir is None else f"ir/{name}",
-                ]
+            table.row(
+                {
+                    "depth": f"depth/{name}",
+                    "thermal": f"thermal/{name}",
+                    "depth_time_s": repr(pair.depth_time_s),
+                    "thermal_time_s": repr(pair.thermal_time_s),
+                    "fpa_temp_c": "" if math.isnan(fpa) else repr(fpa),
+                    "in_ffc": int(pair.telemetry.in_ffc),
+                    "ir": "" if pair.ir is None else f"ir/{name}",
+                }
             )
     rig = Calibration(
         calibration.depth,
