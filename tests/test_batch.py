@@ -114,6 +114,7 @@ def test_outputs_are_those_of_run_byte_for_byte(rig_files: dict[str, Path], tmp_
     assert sum(n for what, _, n in seen if what == "advance") == 65  # every pair, once
     rows = read_csv(tmp_path / "out" / "summary.csv")
     assert [r["recording"] for r in rows] == ["a", "b"]
+    csv_says_what_parquet_says(tmp_path / "out")
     for row in rows:
         events = read_jsonl(d / f"run_{row['recording']}" / FILES[1])
         frames = read_jsonl(d / f"run_{row['recording']}" / FILES[0])
@@ -140,6 +141,19 @@ def read_jsonl(path: Path) -> list[dict]:  # type: ignore[type-arg]
 def read_csv(path: Path) -> list[dict[str, str]]:
     with open(path, encoding="utf-8", newline="") as f:
         return list(csv.DictReader(f))
+
+
+def csv_says_what_parquet_says(out: Path) -> None:
+    """summary.csv read by column name holds, cell for cell, summary.parquet's values (an
+    empty cell: none)."""
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(out / "summary.parquet")
+    rows = read_csv(out / "summary.csv")
+    assert list(rows[0]) == table.column_names
+    assert rows == [
+        {k: "" if v is None else str(v) for k, v in row.items()} for row in table.to_pylist()
+    ]
 
 
 def hottest_of(d: Path, name: str) -> float:
@@ -239,6 +253,7 @@ def test_bad_recordings_fail_alone_in_one_line(
     same_as_run(d, tmp_path / "out", "a")
     rows = {r["recording"]: r for r in read_csv(tmp_path / "out" / "summary.csv")}
     assert rows["gone"]["status"].startswith("failed: ") and rows["a"]["status"] == "ok"
+    csv_says_what_parquet_says(tmp_path / "out")
 
 
 def test_resume_skips_complete_and_redoes_partial(

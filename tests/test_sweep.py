@@ -205,3 +205,13 @@ def test_appended_rows_go_under_the_files_own_header(tmp_path: Path) -> None:
     assert back[1] == {"note": "", "reference_temp_c": "39", "measured_temp_c": "38.5",
                        "vox_temp_c": "30.25", "distance_m": "1.5"}  # fmt: skip
     assert read_sweep_csv(theirs).names == ["note", *reversed(REQUIRED)]
+
+
+def test_a_row_that_does_not_name_every_column_of_a_new_file_is_refused(tmp_path: Path) -> None:
+    row = {"distance_m": 1.5, "vox_temp_c": 30.0, "measured_temp_c": 38.5, "reference_temp_c": 39}
+    appender = SweepAppender(tmp_path / "s.csv", [*REQUIRED, "n"])
+    with pytest.raises(ValueError, match="CSV row lacks n"):
+        appender.write(row)
+    with pytest.raises(ValueError, match="'note'"):  # csv.DictWriter's own refusal
+        appender.write({**row, "n": 1.0, "note": 2.0})
+    appender.close()

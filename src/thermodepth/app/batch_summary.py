@@ -5,13 +5,12 @@ time, per recording)."""
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 from pathlib import Path
 from typing import Any
 
 from ..alarms import RAISED
+from ..csvfile import write_csv
 from ..io.measurements import FILES
 from ..plotting import distinct_styles, pyplot, save_figure
 
@@ -117,11 +116,7 @@ def write_tables(
     columns = [*COLUMNS, *(f"alarms:{r}" for r in rules)]
     table = pa.Table.from_pylist(rows, schema=_schema(pa, columns))
     pq.write_table(table, out / "summary.parquet")
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=columns)
-    writer.writeheader()
-    writer.writerows(rows)
-    (out / "summary.csv").write_text(buf.getvalue(), encoding="utf-8", newline="")
+    write_csv(out / "summary.csv", columns, rows)
     plot_hottest(series, out / "summary.png")
     (out / "summary.md").write_text(_markdown(rows), encoding="utf-8")
     return rows
