@@ -1,6 +1,6 @@
 """The 3D thermal map's parts: the TSDF and its mesh against known geometry, the fusion's
 weights and robust reduction against samples built by hand, the model's files read back by
-independent readers (plyfile, trimesh, pygltflib), a bag's /tf as the trajectory, and the
+independent readers (trimesh, pygltflib), a bag's /tf as the trajectory, and the
 hotspots located on a mesh."""
 
 from __future__ import annotations
@@ -263,7 +263,6 @@ def test_hotspots_are_connected_hot_parts_with_their_area_and_peak() -> None:
 def test_model_files_are_read_back_by_independent_readers(tmp_path: Path) -> None:
     trimesh = pytest.importorskip("trimesh", reason="model.glb needs the map extra (trimesh)")
     pygltflib = pytest.importorskip("pygltflib", reason="a second glTF reader (dev extra)")
-    from plyfile import PlyData
 
     from thermodepth.io.model import (
         SCALARS,
@@ -284,15 +283,18 @@ def test_model_files_are_read_back_by_independent_readers(tmp_path: Path) -> Non
     scalars = {name: rng.uniform(0, 9, 50).astype(np.float32) for name in SCALARS}
     scalars["temperature"] = temp
     ply = write_model_ply(tmp_path / "m.ply", verts, faces, normals, rgb, scalars)
-    data = PlyData.read(str(ply))  # plyfile: an independent reader
-    np.testing.assert_allclose(data["vertex"]["x"], verts[:, 0].astype(np.float32))
-    np.testing.assert_array_equal(np.vstack(data["face"]["vertex_indices"]), faces)
-    np.testing.assert_array_equal(data["vertex"]["red"], rgb[:, 0])
+    mesh = trimesh.load(ply, process=False)  # trimesh's own PLY reader: an independent one
+    np.testing.assert_array_equal(mesh.vertices, verts.astype(np.float32))
+    np.testing.assert_array_equal(mesh.faces, faces)
+    np.testing.assert_array_equal(mesh.visual.vertex_colors[:, :3], rgb)
+    raw = mesh.metadata["_ply_raw"]["vertex"]["data"]  # every property as the file has it
+    for name in SCALARS:
+        np.testing.assert_array_equal(raw[f"scalar_{name}"], scalars[name].astype(np.float32))
+    np.testing.assert_array_equal(raw["nz"], normals[:, 2].astype(np.float32))
     back = read_model_ply(ply)
     np.testing.assert_allclose(back["temperature"], temp.astype(np.float32), equal_nan=True)
     np.testing.assert_allclose(back["spread"], scalars["spread"])
-    mesh = trimesh.load(ply, process=False)
-    assert mesh.vertices.shape == (50, 3) and mesh.faces.shape == (80, 3)
+    np.testing.assert_array_equal(back["triangles"], faces)
     scale = {"palette": "inferno", "min_c": 20.0, "max_c": 80.0}
     glb = write_model_glb(tmp_path / "m.glb", verts, faces, normals, rgb, temp, scale)
     gltf = pygltflib.GLTF2().load(str(glb))

@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from plyfile import PlyData
 
 from ..errors import InputError
 from ..plotting import temperature_rgb
+from .ply import read_ply, write_ply
 
 FloatArray = NDArray[np.float64]
 SCALARS = ("temperature", "weight", "views", "spread", "best", "last_seen")
@@ -64,37 +64,26 @@ def write_model_ply(
         vertex[c] = rgb[:, k]
     for name in SCALARS:
         vertex[f"scalar_{name}"] = scalars[name]
-    faces = np.empty(len(triangles), dtype=[("n", "u1"), ("index", "<i4", (3,))])
-    faces["n"] = 3
-    faces["index"] = triangles
-    kinds = {"<f4": "float", "u1": "uchar"}
-    header = [
-        "ply",
-        "format binary_little_endian 1.0",
-        "comment thermodepth thermal model: metres (world), temperatures C, times s",
-        f"element vertex {len(vertex)}",
-        *(f"property {kinds[t]} {name}" for name, t in fields),
-        f"element face {len(faces)}",
-        "property list uchar int vertex_indices",
-        "end_header",
-    ]
-    with open(path, "wb") as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(vertex.tobytes())
-        f.write(faces.tobytes())
-    return path
+    faces = np.empty(len(triangles), dtype=[("vertex_indices", "<i4", (3,))])
+    faces["vertex_indices"] = triangles
+    comment = "thermodepth thermal model: metres (world), temperatures C, times s"
+    return write_ply(path, {"vertex": vertex, "face": faces}, [comment])
 
 
 def read_model_ply(path: Path) -> dict[str, NDArray[Any]]:
-    """A model PLY's vertices (V, 3), triangles (F, 3) and scalars by name (V,)."""
-    try:
-        ply = PlyData.read(str(path))
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: not a readable PLY ({exc})") from None
-    v = ply["vertex"]
+    """A model PLY's vertices (V, 3), triangles (F, 3) and scalars by name (V,); a file
+    that is not one is an InputError naming it."""
+    need = {
+        "vertex": ("x", "y", "z", *(f"scalar_{name}" for name in SCALARS)),
+        "face": ("vertex_indices",),
+    }
+    ply = read_ply(path, need)
+    v, triangles = ply["vertex"], ply["face"]["vertex_indices"]
+    if triangles.shape[1:] != (3,) and len(triangles):
+        raise InputError(f"{path}: faces of {triangles.shape[1]} vertices, not triangles")
     out: dict[str, NDArray[Any]] = {
         "vertices": np.stack([v["x"], v["y"], v["z"]], axis=-1),
-        "triangles": np.vstack(ply["face"]["vertex_indices"]),
+        "triangles": triangles.reshape(-1, 3),
     }
     for name in SCALARS:
         out[name] = np.asarray(v[f"scalar_{name}"])

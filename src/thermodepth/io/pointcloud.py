@@ -1,4 +1,5 @@
-"""Point clouds with temperature: PLY (plyfile), one vertex per depth pixel that has one.
+"""Point clouds with temperature: binary PLY (:mod:`thermodepth.io.ply`), one vertex per depth
+pixel that has one.
 
 Vertices: x, y, z (float32, metres, depth camera frame: x right, y down, z forward),
 temperature (float32, C) and red, green, blue (uint8: the temperature through a colour map,
@@ -11,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from plyfile import PlyData, PlyElement
 
 from ..plotting import temperature_rgb
+from .ply import read_ply as read_elements
+from .ply import write_ply as write_elements
 
 
 def write_ply(
@@ -23,11 +25,19 @@ def write_ply(
     vmin_c: float | None = None,
     vmax_c: float | None = None,
     colormap: str = "inferno",
-    binary: bool = True,
 ) -> Path:
-    """Write points (N, 3) with their temperatures (N,) as a PLY file.
+    """Write points (N, 3) with their temperatures (N,) as a binary little-endian PLY file
+    (its folder made if needed).
 
-    vmin_c / vmax_c: the colour map's range (default: 1st and 99th percentile).
+    Args:
+        path: the file.
+        points_m: (N, 3) positions, m, depth camera frame.
+        temp_c: (N,) temperatures, C (NaN: none).
+        vmin_c, vmax_c: the colour map's range, C (default: 1st and 99th percentile).
+        colormap: a matplotlib colour map's name.
+
+    Returns:
+        ``path``.
     """
     pts = np.asarray(points_m, np.float32).reshape(-1, 3)
     t = np.asarray(temp_c, np.float32).ravel()
@@ -53,18 +63,16 @@ def write_ply(
     vertex["x"], vertex["y"], vertex["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
     vertex["temperature"] = t
     vertex["red"], vertex["green"], vertex["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    PlyData(
-        [PlyElement.describe(vertex, "vertex")],
-        text=not binary,
-        comments=["thermodepth point cloud: metres (depth camera frame), temperature C"],
-    ).write(str(out))
-    return out
+    return write_elements(
+        path,
+        {"vertex": vertex},
+        ["thermodepth point cloud: metres (depth camera frame), temperature C"],
+    )
 
 
 def read_ply(path: str | Path) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Points (N, 3) and temperatures (N,) of a PLY written by :func:`write_ply`."""
-    v = PlyData.read(str(path))["vertex"]
+    """Points (N, 3) and temperatures (N,) of a PLY written by :func:`write_ply`; a file
+    that is not one is an InputError naming it."""
+    v = read_elements(path, {"vertex": ("x", "y", "z", "temperature")})["vertex"]
     pts = np.stack([v["x"], v["y"], v["z"]], axis=-1).astype(np.float32)
     return pts, np.asarray(v["temperature"], np.float32)
