@@ -395,3 +395,13 @@ def test_help_reads_as_text(command: str) -> None:
         "temperature": "Reflected apparent temperature, C (default: the air's).",
     }
     assert helps[command] in words
+
+
+def test_every_cli_module_stays_thin() -> None:
+    """The CLI is typer signatures over app/: no file of it over 400 lines."""
+    import thermodepth.cli
+
+    folder = Path(thermodepth.cli.__file__).parent
+    lines = {p.name: len(p.read_text(encoding="utf-8").splitlines()) for p in folder.glob("*.py")}
+    assert {"__init__.py", "measure.py", "monitor.py"} <= set(lines)
+    assert {name: n for name, n in lines.items() if n > 400} == {}

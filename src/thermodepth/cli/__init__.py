@@ -7,7 +7,8 @@ gave the field (``--emissivity: ...``). One module per group of commands; :mod:`
 the app, the error handling and the shared options.
 """
 
-from . import batch, calibrate, compensation, measure, simulate, thermal_map
+# in this order: the commands are listed in `thermodepth --help` as they are registered
+from . import batch, calibrate, compensation, measure, monitor, ros, simulate, thermal_map
 from .base import app
 from .measure import print_frame
 
@@ -18,7 +19,9 @@ __all__ = [
     "compensation",
     "main",
     "measure",
+    "monitor",
     "print_frame",
+    "ros",
     "simulate",
     "thermal_map",
 ]
