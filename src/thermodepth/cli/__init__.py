@@ -7,7 +7,7 @@ gave the field (``--emissivity: ...``). One module per group of commands; :mod:`
 the app, the error handling and the shared options.
 """
 
-from . import batch, calibrate, compensation, measure, simulate, thermal_map
+from . import batch, calibrate, compensation, measure, ros, simulate, thermal_map
 from .base import app
 from .measure import print_frame
 
@@ -19,6 +19,7 @@ __all__ = [
     "main",
     "measure",
     "print_frame",
+    "ros",
     "simulate",
     "thermal_map",
 ]

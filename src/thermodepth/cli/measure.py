@@ -1,6 +1,5 @@
-"""``devices``, ``record``, ``run``, ``view``, ``export``, ``monitor`` and ``dashboard``:
-cameras, recordings, the live measuring run, ROS bags, the always-on monitor and one screen
-for many."""
+"""``devices``, ``record``, ``run``, ``view``, ``monitor`` and ``dashboard``: cameras,
+recordings, the live measuring run, the always-on monitor and one screen for many."""
 
 from __future__ import annotations
 
@@ -382,49 +381,3 @@ def dashboard_cmd(
 
     http = HttpConfig(listen=listen, token_file=token_file, tls_cert=tls_cert, tls_key=tls_key)
     run_dashboard(mqtt, data, http, MqttSettings(password_file=password_file, ca_file=ca_file))
-
-
-@app.command("export")
-@one_line_errors
-def export_cmd(
-    source: Annotated[
-        str, typer.Argument(help="Any --source spec: recording:PATH, rosbag:PATH, sim, ...")
-    ],
-    out: Annotated[Path, typer.Argument(help="The new bag: a .mcap file, or a folder/.bag.")],
-    settings: Annotated[
-        Path | None, typer.Option(help="Settings YAML (calibration, compensation, rules).")
-    ] = None,
-    frames: Annotated[int | None, typer.Option(help="Stop after this many pairs.")] = None,
-    bag_format: Annotated[
-        str,
-        typer.Option(
-            "--format",
-            help="mcap (ROS 2 messages, one file), rosbag2 (a folder with .db3), rosbag2-mcap "
-            "(a folder with .mcap), ros1 (a .bag).",
-        ),
-    ] = "mcap",
-    compression: Annotated[
-        str, typer.Option(help="none, lz4 or zstd (mcap); zstd (rosbag2-mcap); lz4 (ros1).")
-    ] = "none",
-    cloud_points: Annotated[
-        int, typer.Option(help="The most points of a fused frame's cloud (every k-th kept).")
-    ] = 100_000,
-) -> None:
-    """Fuse a source into a ROS bag that Foxglove and ROS tools open (docs/ros.md): depth,
-    raw thermal, camera_info, /tf_static, the sensor temperature, the temperature on the
-    depth grid, a point cloud with a temperature field, hotspot markers, measurements and
-    alarms as JSON."""
-    from ..app.run import RunOptions, run
-    from ..io.ros import COMPRESSIONS, FORMATS
-    from ..sinks.bag import BagSink
-
-    for name, value, allowed in (("--format", bag_format, FORMATS),
-                                 ("--compression", compression, COMPRESSIONS)):  # fmt: skip
-        if value not in allowed:
-            raise ThermodepthError(f"{name} {value}: expected one of {', '.join(allowed)}")
-    sink = BagSink(out, bag_format, compression, cloud_points)
-    result = run(RunOptions(source, settings, frames), [sink], warn_line)
-    console.print(f"{result.frames} frames fused; stopped: {result.stopped}")
-    print_outputs(result)
-    if result.error:
-        raise ThermodepthError(result.error)
