@@ -237,7 +237,7 @@ def centikelvin_image(temp_c: NDArray[Any]) -> NDArray[np.uint16]:
     Returns:
         (H, W) uint16, round(100 * (T_C + 273.15)): 0.01 K a step; 0 where there is no
         temperature; readings above :data:`CENTIKELVIN_MAX_C` held at 65535, and any
-        below absolute zero at 1 (so that 0 keeps meaning none).
+        at or below absolute zero at 1 (so that 0 keeps meaning none).
     """
     kelvin_100 = np.rint((np.asarray(temp_c, np.float64) + ZERO_C_IN_K) * 100.0)
     none = np.isnan(kelvin_100)
