@@ -239,11 +239,14 @@ def centikelvin_image(temp_c: NDArray[Any]) -> NDArray[np.uint16]:
         temperature; readings above :data:`CENTIKELVIN_MAX_C` held at 65535, and any
         at or below absolute zero at 1 (so that 0 keeps meaning none).
     """
-    kelvin_100 = np.rint((np.asarray(temp_c, np.float64) + ZERO_C_IN_K) * 100.0)
+    kelvin_100 = np.array(temp_c, np.float64)  # in place from here: a frame is a megapixel
+    kelvin_100 += ZERO_C_IN_K
+    kelvin_100 *= 100.0
+    np.rint(kelvin_100, out=kelvin_100)
     none = np.isnan(kelvin_100)
-    out = np.clip(np.where(none, 1.0, kelvin_100), 1.0, 65535.0)  # +-inf held too
-    out[none] = 0.0
-    return out.astype(np.uint16)
+    np.clip(kelvin_100, 1.0, 65535.0, out=kelvin_100)  # +-inf held too
+    kelvin_100[none] = 0.0
+    return kelvin_100.astype(np.uint16)
 
 
 def camera_info_msg(store: Any, intr: Intrinsics, time_s: float, frame_id: str) -> Any:
