@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
@@ -165,62 +165,59 @@ def test_bad_bags_are_one_line(rig: tuple[Any, list[Any]], tmp_path: Path) -> No
     )
 
 
-def test_an_export_read_by_foxglove_s_reader_and_by_rosbags(tmp_path: Path) -> None:
+class Export(NamedTuple):
+    """A simulated run exported to MCAP: its path, its fused frames, and its messages as
+    Foxglove's own reader (mcap with mcap-ros2-support) decodes them, by topic."""
+
+    path: Path
+    fused: list[Any]
+    messages: dict[str, list[Any]]
+
+
+@pytest.fixture(scope="module")
+def export(tmp_path_factory: pytest.TempPathFactory) -> Export:
     pytest.importorskip("mcap_ros2", reason="the second reader: mcap-ros2-support (dev extra)")
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
-    from rosbags.highlevel import AnyReader
 
     from thermodepth.app.run import RunOptions, run
-    from thermodepth.io.pointcloud import read_ply, write_ply
     from thermodepth.sinks import CallbackSink
-    from thermodepth.sinks.bag import TOPICS as FUSED
     from thermodepth.sinks.bag import BagSink
 
-    settings = tmp_path / "s.yaml"
+    folder = tmp_path_factory.mktemp("export")
+    settings = folder / "s.yaml"
     settings.write_text("hotspots: {threshold_c: 50}\nalarms:\n  - {name: hot, above_c: 60}\n")
     fused: list[Any] = []
-    pairs: list[Any] = []
-    out = tmp_path / "run.mcap"
+    out = folder / "run.mcap"
     result = run(
         RunOptions("sim", settings, frames=N),
         [BagSink(out, cloud_points=10**7), CallbackSink(fused.append)],
     )
     assert result.frames == N
-    counts: dict[str, int] = {}
-    clouds, infos = [], {}
+    messages: dict[str, list[Any]] = {}
     with out.open("rb") as f:
-        for _, channel, _, msg in make_reader(
-            f, decoder_factories=[DecoderFactory()]
-        ).iter_decoded_messages():
-            counts[channel.topic] = counts.get(channel.topic, 0) + 1
-            if channel.topic == FUSED["cloud"]:
-                clouds.append(msg)
-            if channel.topic.endswith("camera_info"):
-                infos[channel.topic] = msg
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages():
+            messages.setdefault(channel.topic, []).append(msg)
+    return Export(out, fused, messages)
+
+
+def test_an_export_read_by_foxglove_s_reader_and_by_rosbags(export: Export) -> None:
+    from rosbags.highlevel import AnyReader
+
+    from thermodepth.io.pointcloud import read_ply, write_ply
+    from thermodepth.sinks.bag import TOPICS as FUSED
+
+    out, fused = export.path, export.fused
+    tmp_path = out.parent
+    counts = {topic: len(msgs) for topic, msgs in export.messages.items()}
     per_frame = [TOPICS[k] for k in ("depth", "depth_info", "thermal", "thermal_info", "vox")]
-    per_frame += [FUSED[k] for k in ("temperature", "cloud", "markers", "measurements")]
+    per_frame += [FUSED[k] for k in ("temperature", "temperature_ck", "cloud", "markers")]
+    per_frame += [FUSED["measurements"]]
     assert counts == {"/tf_static": 1, **{t: N for t in per_frame}, FUSED["alarms"]: 1}
     with AnyReader([out]) as reader:
         assert {c.topic: c.msgcount for c in reader.connections} == counts
-    # the layout in the docs names these topics, and colours the cloud by one of its fields
-    # with the settings Foxglove's 3D panel knows (colormap: turbo or rainbow, a min and max)
-    layout = json.loads((Path(__file__).parents[1] / "examples/foxglove-layout.json").read_text())
-    panels = layout["configById"]
-    image, raw = panels["Image!thermodepth"], panels["RawMessages!thermodepth"]
-    named = {
-        *panels["3D!thermodepth"]["topics"],
-        image["imageMode"]["imageTopic"],
-        raw["topicPath"],
-    }
-    assert named <= set(counts)
-    cloud_look = panels["3D!thermodepth"]["topics"][FUSED["cloud"]]
-    assert cloud_look["colorMode"] == "colormap" and cloud_look["colorMap"] in ("turbo", "rainbow")
-    assert (
-        cloud_look["colorField"] == "temperature"
-        and cloud_look["minValue"] < cloud_look["maxValue"]
-    )
-    assert panels["3D!thermodepth"]["followTf"] == "thermodepth_depth_optical_frame"
+    infos = {t: export.messages[t][0] for t in (TOPICS["thermal_info"], TOPICS["depth_info"])}
     cal = fused[0].calibration
     k = infos[TOPICS["thermal_info"]].k
     assert (k[0], k[2], k[4], k[5]) == (
@@ -230,7 +227,7 @@ def test_an_export_read_by_foxglove_s_reader_and_by_rosbags(tmp_path: Path) -> N
         cal.thermal.cy,
     )
     assert list(infos[TOPICS["depth_info"]].d) == list(cal.depth.distortion)
-    for frame, cloud in zip(fused, clouds, strict=True):
+    for frame, cloud in zip(fused, export.messages[FUSED["cloud"]], strict=True):
         points, temps = frame.points()
         ply = write_ply(tmp_path / f"f{frame.index}.ply", points, temps, 20.0, 80.0)
         ply_points, ply_temps = read_ply(ply)
@@ -248,6 +245,102 @@ def test_an_export_read_by_foxglove_s_reader_and_by_rosbags(tmp_path: Path) -> N
         pairs = list(source)
     assert [p.index for p in pairs] == list(range(N))
     assert all(np.array_equal(p.depth, f.depth) for p, f in zip(pairs, fused, strict=True))
+
+
+def pixels(msg: Any, dtype: str) -> np.ndarray:
+    """An Image's pixels as its rows (``step`` bytes each) hold them, little-endian."""
+    rows = np.frombuffer(bytes(msg.data), np.uint8).reshape(msg.height, msg.step)
+    return rows[:, : msg.width * np.dtype(dtype).itemsize].copy().view(dtype)
+
+
+def test_the_temperature_as_a_16uc1_image_of_centikelvin(export: Export) -> None:
+    """Foxglove colours a 16UC1 image between a min and a max (a 32FC1 one it shows as
+    value x 255: white): the same temperatures in 0.01 K, 0 where there is none."""
+    from thermodepth.sinks.bag import TOPICS as FUSED
+
+    floats, ck = export.messages[FUSED["temperature"]], export.messages[FUSED["temperature_ck"]]
+    none = some = 0
+    for f, c, frame in zip(floats, ck, export.fused, strict=True):
+        assert (c.encoding, c.is_bigendian, c.step) == ("16UC1", 0, 2 * c.width)
+        assert (c.width, c.height) == (f.width, f.height) == frame.temp_depth_c.shape[::-1]
+        stamps = [(m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id) for m in (c, f)]
+        assert stamps[0] == stamps[1]  # the same stamp, in the depth camera's frame
+        assert c.header.frame_id == "thermodepth_depth_optical_frame"
+        temp_c = pixels(f, "<f4").astype(np.float64)
+        got = pixels(c, "<u2")
+        finite = np.isfinite(temp_c)
+        assert np.array_equal(got[finite], np.round(100 * (temp_c[finite] + 273.15)))
+        assert np.all(np.abs(got[finite] / 100 - 273.15 - temp_c[finite]) <= 0.005 + 1e-9)
+        assert np.all(got[~finite] == 0) and np.all(got[finite] > 0)
+        none, some = none + int((~finite).sum()), some + int(finite.sum())
+    assert none > 0 and some > 0  # both kinds of pixel were there to check
+
+
+def test_centikelvin_at_its_edges() -> None:
+    """0.01 K a step, rounded; NaN 0; beyond 655.35 K held at 65535, below 0 K at 1."""
+    from thermodepth.io.ros import CENTIKELVIN_MAX_C, centikelvin_image
+
+    temp_c = np.array([[np.nan, -273.15, -300.0, 0.0, 0.004, 0.006, 36.6],
+                       [382.2, 382.21, 1000.0, np.inf, -np.inf, -273.14, 20.0]])  # fmt: skip
+    assert centikelvin_image(temp_c).tolist() == [
+        [0, 1, 1, 27315, 27315, 27316, 30975],
+        [65535, 65535, 65535, 65535, 1, 1, 29315],
+    ]
+    assert centikelvin_image(temp_c).dtype == np.uint16
+    assert abs(CENTIKELVIN_MAX_C - 382.2) < 1e-9
+
+
+def test_the_foxglove_layout_fits_an_export(export: Export) -> None:
+    """examples/foxglove-layout.json, with the keys Foxglove's (and Lichtblick's) 3D and
+    Image panels read: every topic it names is in an export; the Image panel colours the
+    16UC1 centikelvin image (colormap, min < max, the cloud's range in centikelvin) with
+    the depth camera's camera_info; the 3D panel colours the cloud by its temperature and
+    its camera, a few metres off, has the cloud in view."""
+    from thermodepth.sinks.bag import TOPICS as FUSED
+
+    layout = json.loads((Path(__file__).parents[1] / "examples/foxglove-layout.json").read_text())
+    panels = layout["configById"]
+    three_d, image = panels["3D!thermodepth"], panels["Image!thermodepth"]["imageMode"]
+    named = {*three_d["topics"], image["imageTopic"], image["calibrationTopic"]}
+    named.add(panels["RawMessages!thermodepth"]["topicPath"])
+    assert named <= set(export.messages)
+    cloud_look = three_d["topics"][FUSED["cloud"]]
+    assert cloud_look["colorMode"] == "colormap" and cloud_look["colorMap"] in ("turbo", "rainbow")
+    assert cloud_look["colorField"] == "temperature"
+    assert cloud_look["minValue"] < cloud_look["maxValue"]
+    assert three_d["followTf"] == "thermodepth_depth_optical_frame"
+
+    shown = export.messages[image["imageTopic"]][0]
+    info = export.messages[image["calibrationTopic"]][0]
+    assert shown.encoding == "16UC1"  # the encoding whose colour map and min/max apply
+    assert (info.width, info.height, info.header.frame_id) == (
+        shown.width,
+        shown.height,
+        shown.header.frame_id,
+    )
+    assert image["colorMode"] == "colormap" and image["colorMap"] in ("turbo", "rainbow")
+    assert image["minValue"] < image["maxValue"]
+    for key in ("minValue", "maxValue"):  # the cloud's range, in centikelvin
+        assert image[key] == round(100 * (cloud_look[key] + 273.15))
+
+    # The 3D panel's camera (its CameraStateSettings): an orbit of `distance` about
+    # `targetOffset` in the followed frame, Z up, `phi` degrees from +Z, `thetaOffset` about
+    # Z; the eye at target + d (sin phi sin theta, -sin phi cos theta, cos phi), theta =
+    # -thetaOffset, looking at the target.
+    cam = three_d["cameraState"]
+    assert cam["perspective"] and 0.5 <= cam["distance"] <= 5.0
+    phi, theta = np.radians(cam["phi"]), -np.radians(cam["thetaOffset"])
+    target = np.array(cam["targetOffset"], float)
+    ray = np.array([np.sin(phi) * np.sin(theta), -np.sin(phi) * np.cos(theta), np.cos(phi)])
+    eye = target + cam["distance"] * ray
+    points, _ = export.fused[-1].points()
+    assert len(points) > 1000
+    seen = points - eye
+    along = seen @ -ray  # in front of the eye, between the near and the far plane
+    assert np.all(along > cam["near"]) and np.all(along < cam["far"])
+    off_axis = np.degrees(np.arccos(np.clip(along / np.linalg.norm(seen, axis=1), -1, 1)))
+    assert np.percentile(off_axis, 90) < cam["fovy"] / 2  # most of the cloud in the picture
+    assert np.linalg.norm(np.median(points, axis=0) - target) < 1.0
 
 
 def test_a_run_live_in_foxglove_read_as_its_websocket_client_reads_it() -> None:
@@ -280,7 +373,7 @@ def test_a_run_live_in_foxglove_read_as_its_websocket_client_reads_it() -> None:
     async def listen() -> tuple[dict[str, Any], bytes]:
         async with websockets.connect(url, subprotocols=["foxglove.sdk.v1"]) as ws:
             channels: dict[str, Any] = {}
-            wanted = {FUSED["cloud"], FUSED["markers"], TOPICS["thermal"]}
+            wanted = {FUSED["cloud"], FUSED["markers"], FUSED["temperature_ck"], TOPICS["thermal"]}
             while not wanted <= set(channels):  # each advertised when it first has a message
                 msg = json.loads(await asyncio.wait_for(ws.recv(), 10))
                 if msg["op"] == "advertise":
@@ -300,6 +393,9 @@ def test_a_run_live_in_foxglove_read_as_its_websocket_client_reads_it() -> None:
         done.set()
         runner.join(60)
     assert TOPICS["thermal"] in channels and FUSED["markers"] in channels
+    # the temperature as the 16UC1 image Foxglove colours; not the 32FC1 one it shows white
+    # (written before the cloud, so it would have been advertised by now)
+    assert FUSED["temperature_ck"] in channels and FUSED["temperature"] not in channels
     cloud = channels[FUSED["cloud"]]
     assert (cloud["encoding"], cloud["schemaEncoding"]) == ("cdr", "ros2msg")
     assert cloud["schemaName"] == "sensor_msgs/msg/PointCloud2"
@@ -325,9 +421,12 @@ def test_a_bag_recorded_replays_as_the_bag(rig: tuple[Any, list[Any]], tmp_path:
     ] * N
 
 
-@pytest.mark.parametrize("fmt", ["rosbag2", "ros1"])
-def test_an_export_as_a_rosbag2_or_ros1_bag(fmt: str, tmp_path: Path) -> None:
-    """The writer thread holds the db3 bag's SQLite; a ROS 1 bag takes the same messages."""
+@pytest.mark.parametrize(("fmt", "temperature_image"), [("rosbag2", "32FC1"), ("ros1", "16UC1")])
+def test_an_export_as_a_rosbag2_or_ros1_bag(
+    fmt: str, temperature_image: str, tmp_path: Path
+) -> None:
+    """The writer thread holds the db3 bag's SQLite; a ROS 1 bag takes the same messages;
+    the temperature on the depth grid as one image only, as asked."""
     from rosbags.highlevel import AnyReader
 
     from thermodepth.app.run import RunOptions, run
@@ -335,10 +434,12 @@ def test_an_export_as_a_rosbag2_or_ros1_bag(fmt: str, tmp_path: Path) -> None:
     from thermodepth.sinks.bag import BagSink
 
     out = tmp_path / ("bag" if fmt == "rosbag2" else "run.bag")
-    run(RunOptions("sim", None, frames=3), [BagSink(out, fmt)])
+    run(RunOptions("sim", None, frames=3), [BagSink(out, fmt, temperature_image=temperature_image)])
     with AnyReader([out]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
     assert counts["/tf_static"] == 1 and counts[FUSED["cloud"]] == counts[TOPICS["depth"]] == 3
+    kept, left = ("temperature", "temperature_ck")[:: 1 if temperature_image == "32FC1" else -1]
+    assert counts[FUSED[kept]] == 3 and FUSED[left] not in counts
     with pytest.raises(InputError, match="exists already"):
         run(RunOptions("sim", None, frames=1), [BagSink(out, fmt)])
 
@@ -360,3 +461,14 @@ def test_the_infrared_image_of_each_depth_frame(tmp_path: Path) -> None:
     assert one_line(f"rosbag:{bag},ir=/camera/infra9").startswith(
         f"rosbag:{bag}: no topic /camera/infra9 (ir=)"
     )
+
+
+def test_export_says_which_temperature_images_it_knows(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from thermodepth.cli import app
+
+    out = tmp_path / "x.mcap"
+    result = CliRunner().invoke(app, ["export", "sim", str(out), "--temperature-image", "8UC1"])
+    assert result.exit_code != 0 and not out.exists()
+    assert "--temperature-image 8UC1: expected one of both, 32FC1, 16UC1" in result.output

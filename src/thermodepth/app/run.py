@@ -166,13 +166,16 @@ options, the settings and where warnings go."""
 
 
 def foxglove_sink(address: str) -> Sink:
-    """The run as ROS messages to a live Foxglove server on ``address``."""
+    """The run as ROS messages to a live Foxglove server on ``address``; the temperature on
+    the depth grid as the 16UC1 centikelvin image only: the server's clients are Foxglove
+    apps, which show a 32FC1 image white."""
     from ..sinks.bag import BagSink
     from ..sinks.foxglove import MAX_HZ, FoxgloveWriter
 
     return BagSink(
-        None, cloud_points=50_000, open_writer=lambda: FoxgloveWriter(address), max_hz=MAX_HZ
-    )
+        None, cloud_points=50_000, open_writer=lambda: FoxgloveWriter(address), max_hz=MAX_HZ,
+        temperature_image="16UC1",
+    )  # fmt: skip
 
 
 def provenance(settings_path: Path | None, settings: Settings) -> dict[str, Any]:

@@ -1,4 +1,4 @@
-"""``export``: a fused source as a ROS bag (docs/ros.md)."""
+"""``export``: what a run measured, as a ROS bag for Foxglove and ROS tools."""
 
 from __future__ import annotations
 
@@ -37,6 +37,13 @@ def export_cmd(
     cloud_points: Annotated[
         int, typer.Option(help="The most points of a fused frame's cloud (every k-th kept).")
     ] = 100_000,
+    temperature_image: Annotated[
+        str,
+        typer.Option(
+            help="The temperature on the depth grid as 32FC1 (C, for ROS tools), 16UC1 "
+            "(centikelvin, what Foxglove colours) or both.",
+        ),
+    ] = "both",
 ) -> None:
     """Fuse a source into a ROS bag that Foxglove and ROS tools open (docs/ros.md): depth,
     raw thermal, camera_info, /tf_static, the sensor temperature, the temperature on the
@@ -44,13 +51,15 @@ def export_cmd(
     alarms as JSON."""
     from ..app.run import RunOptions, run
     from ..io.ros import COMPRESSIONS, FORMATS
-    from ..sinks.bag import BagSink
+    from ..sinks.bag import TEMPERATURE_IMAGES, BagSink
 
     for name, value, allowed in (("--format", bag_format, FORMATS),
-                                 ("--compression", compression, COMPRESSIONS)):  # fmt: skip
+                                 ("--compression", compression, COMPRESSIONS),
+                                 ("--temperature-image", temperature_image,
+                                  TEMPERATURE_IMAGES)):  # fmt: skip
         if value not in allowed:
             raise ThermodepthError(f"{name} {value}: expected one of {', '.join(allowed)}")
-    sink = BagSink(out, bag_format, compression, cloud_points)
+    sink = BagSink(out, bag_format, compression, cloud_points, temperature_image=temperature_image)
     result = run(RunOptions(source, settings, frames), [sink], warn_line)
     console.print(f"{result.frames} frames fused; stopped: {result.stopped}")
     print_outputs(result)

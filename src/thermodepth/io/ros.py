@@ -10,7 +10,9 @@ Reading (messages as rosbags deserialises them, ROS 1 or ROS 2): ``sensor_msgs/I
 
 Writing (ROS 2 Humble's definitions unless told the ROS 1 store): the same messages, and a
 ``sensor_msgs/PointCloud2`` of x, y, z and a float32 ``temperature`` (C), a
-``visualization_msgs/MarkerArray`` and ``std_msgs/String`` (JSON).
+``visualization_msgs/MarkerArray`` and ``std_msgs/String`` (JSON); temperatures on an image
+as ``32FC1`` C or as ``16UC1`` centikelvin (:func:`centikelvin_image`), the form Foxglove
+colours.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from ..calibration import Calibration
 from ..camera import Intrinsics, RigidTransform
 from ..errors import InputError
 from ..frames import FramePair
+from ..radiometry import ZERO_C_IN_K
 from ..trajectory import Trajectory
 
 INSTALL = "ROS bags and MCAP need the ros extra: pip install 'thermodepth[ros]'"
@@ -219,6 +222,31 @@ def image_msg(
         height=pixels.shape[0], width=pixels.shape[1], encoding=encoding, is_bigendian=0,
         step=pixels.strides[0], data=pixels.reshape(-1).view(np.uint8),
     )  # fmt: skip
+
+
+CENTIKELVIN_MAX_C = 65535 / 100 - ZERO_C_IN_K  # 382.2 C, the most a uint16 of 0.01 K holds
+
+
+def centikelvin_image(temp_c: NDArray[Any]) -> NDArray[np.uint16]:
+    """Temperatures as a ``16UC1`` image of centikelvin, the 16-bit form Foxglove colours
+    with a colour map between a min and a max (it shows a ``32FC1`` image as value x 255).
+
+    Args:
+        temp_c: (H, W) temperatures, C; NaN where there is none.
+
+    Returns:
+        (H, W) uint16, round(100 * (T_C + 273.15)): 0.01 K a step; 0 where there is no
+        temperature; readings above :data:`CENTIKELVIN_MAX_C` held at 65535, and any
+        at or below absolute zero at 1 (so that 0 keeps meaning none).
+    """
+    kelvin_100 = np.array(temp_c, np.float64)  # in place from here: a frame is a megapixel
+    kelvin_100 += ZERO_C_IN_K
+    kelvin_100 *= 100.0
+    np.rint(kelvin_100, out=kelvin_100)
+    none = np.isnan(kelvin_100)
+    np.clip(kelvin_100, 1.0, 65535.0, out=kelvin_100)  # +-inf held too
+    kelvin_100[none] = 0.0
+    return kelvin_100.astype(np.uint16)
 
 
 def camera_info_msg(store: Any, intr: Intrinsics, time_s: float, frame_id: str) -> Any:

@@ -10,12 +10,15 @@ Topics (``/thermodepth/...``; frames ``thermodepth_depth_optical_frame`` and
   ``thermal/sensor_temperature`` (sensor_msgs/Temperature, C); ``infra1/image_rect_raw``
   (mono8, where the source gives it); ``/tf_static`` (the depth frame's pose in the
   thermal's): every pair, as :func:`~thermodepth.io.ros.write_rig`;
-- per fused frame, at its thermal capture time: ``registered/temperature_c`` (32FC1, C, on
-  the depth grid, NaN without a temperature); ``cloud`` (sensor_msgs/PointCloud2: x, y, z in
-  m, depth frame, and a float32 ``temperature`` in C, every k-th point so that at most
-  ``cloud_points`` remain); ``markers`` (visualization_msgs/MarkerArray: each hotspot a
-  sphere of its area with its reading as text); ``measurements`` and ``alarms``
-  (std_msgs/String, JSON as MQTT publishes them).
+- per fused frame, at its thermal capture time, the temperature on the depth grid as
+  ``temperature_image`` asks (:data:`TEMPERATURE_IMAGES`): ``registered/temperature_c``
+  (32FC1, C, NaN without a temperature: for ROS tools; Foxglove shows a float image as
+  value x 255, white) and ``registered/temperature_centikelvin`` (16UC1, 0.01 K, 0 without
+  one: what Foxglove's Image panel colours between a min and a max); ``cloud``
+  (sensor_msgs/PointCloud2: x, y, z in m, depth frame, and a float32 ``temperature`` in C,
+  every k-th point so that at most ``cloud_points`` remain); ``markers``
+  (visualization_msgs/MarkerArray: each hotspot a sphere of its area with its reading as
+  text); ``measurements`` and ``alarms`` (std_msgs/String, JSON as MQTT publishes them).
 """
 
 from __future__ import annotations
@@ -35,7 +38,16 @@ from ..calibration import Calibration
 from ..errors import InputError
 from ..frames import Match, StreamEvent
 from ..io.measurements import jsonable
-from ..io.ros import FRAMES, IMAGE, BagWriter, MessageOutput, header_msg, image_msg, write_rig
+from ..io.ros import (
+    FRAMES,
+    IMAGE,
+    BagWriter,
+    MessageOutput,
+    centikelvin_image,
+    header_msg,
+    image_msg,
+    write_rig,
+)
 from ..pipeline import FusedFrame
 from .base import BaseSink, RunContext, SessionResult
 from .mqtt import alarm_message, measurement_message
@@ -43,6 +55,7 @@ from .mqtt import alarm_message, measurement_message
 PREFIX = "/thermodepth"
 TOPICS = {
     "temperature": f"{PREFIX}/registered/temperature_c",
+    "temperature_ck": f"{PREFIX}/registered/temperature_centikelvin",
     "cloud": f"{PREFIX}/cloud",
     "markers": f"{PREFIX}/markers",
     "measurements": f"{PREFIX}/measurements",
@@ -52,6 +65,9 @@ CLOUD = "sensor_msgs/msg/PointCloud2"
 MARKERS = "visualization_msgs/msg/MarkerArray"
 STRING = "std_msgs/msg/String"
 CLOUD_FIELDS = ("x", "y", "z", "temperature")
+TEMPERATURE_IMAGES = ("both", "32FC1", "16UC1")
+"""Which images of the temperature on the depth grid go: ``32FC1`` (C, ``temperature_c``),
+``16UC1`` (centikelvin, ``temperature_centikelvin``) or both."""
 
 
 def cloud_msg(store: Any, points_m: Any, temp_c: Any, time_s: float, frame_id: str) -> Any:
@@ -153,7 +169,8 @@ class BagSink(BaseSink):
     opens (a live server); ``cloud_points``: the most points a cloud keeps; ``max_hz``: a
     live server's, at most so many pairs and fused frames a second (the others are not
     built at all) and ``/tf_static`` each second for the clients that come later (None:
-    everything, ``/tf_static`` once)."""
+    everything, ``/tf_static`` once); ``temperature_image``: which images of the temperature
+    on the depth grid go (:data:`TEMPERATURE_IMAGES`)."""
 
     def __init__(
         self,
@@ -163,7 +180,11 @@ class BagSink(BaseSink):
         cloud_points: int = 100_000,
         open_writer: Callable[[], MessageOutput] | None = None,
         max_hz: float | None = None,
+        temperature_image: str = "both",
     ) -> None:
+        if temperature_image not in TEMPERATURE_IMAGES:
+            raise ValueError(f"temperature_image {temperature_image!r}")
+        self.temperature_image = temperature_image
         self.path = None if path is None else Path(path)
         self.fmt, self.compression, self.cloud_points = fmt, compression, cloud_points
         self.open_writer, self.max_hz = open_writer, max_hz
@@ -253,7 +274,11 @@ class BagSink(BaseSink):
             return
         s, t, depth_frame = self.writer.store, fused.thermal_time_s, FRAMES["depth"]
         temp = np.asarray(fused.temp_depth_c, np.float32)
-        self._put(TOPICS["temperature"], IMAGE, image_msg(s, temp, t, depth_frame), t)
+        if self.temperature_image in ("both", "32FC1"):
+            self._put(TOPICS["temperature"], IMAGE, image_msg(s, temp, t, depth_frame), t)
+        if self.temperature_image in ("both", "16UC1"):
+            image = image_msg(s, centikelvin_image(temp), t, depth_frame, "16UC1")
+            self._put(TOPICS["temperature_ck"], IMAGE, image, t)
         every = max(1, math.ceil(len(fused.with_temperature) / self.cloud_points))
         points, temps = fused.points(every)
         self._put(TOPICS["cloud"], CLOUD, cloud_msg(s, points, temps, t, depth_frame), t)

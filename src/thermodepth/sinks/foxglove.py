@@ -1,5 +1,6 @@
 """A run live in Foxglove (``run --foxglove [HOST:PORT]``; the ``foxglove`` extra:
-foxglove-sdk): the messages ``export`` writes (:mod:`.bag`), served by foxglove-sdk's
+foxglove-sdk): the messages ``export`` writes (:mod:`.bag`; the temperature on the depth
+grid as its 16UC1 centikelvin image only, which Foxglove colours), served by foxglove-sdk's
 WebSocket server as ROS 2 messages (``ros2msg`` schemas, CDR), at most :data:`MAX_HZ`
 pairs and fused frames a second, the others not even built (the sink's ``max_hz``), and
 ``/tf_static`` once a second, so that a client that connects later has it: a live rig never
