@@ -21,11 +21,13 @@ domain are stamped with their host arrival time instead.
 from __future__ import annotations
 
 import contextlib
+import queue
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -37,6 +39,8 @@ from .base import DeviceGuard, DeviceLostError
 
 DEPTH_FPS = 30
 PLAYBACK_EXTENSIONS = (".bag", ".db3")
+FILE_QUEUE = 4
+"""A file's frames played ahead of the reader, at most (the file waits for it)."""
 DEFAULT_MODES = {"D415": (1280, 720, 30)}
 """The default depth mode of the cameras whose best is not 848x480 at 30 fps (by the model
 in the device's name)."""
@@ -153,6 +157,11 @@ class RealSenseCamera:
         self.restarts = 0
         self.missing_ir = 0
         self._last_number = -1
+        self._closing = threading.Event()
+        self._played: queue.Queue[Any] = queue.Queue(FILE_QUEUE)
+        self._sensor: Any = None
+        self._held: Any = None  # a file's depth frame waiting for its IR image
+        self._irs: dict[int, Any] = {}  # a file's latest IR images by frame number
         self.pipeline = rs.pipeline()
         self.name = f"realsense:{self.path}" if self.path is not None else "realsense"
         profile = self._start_live(serial) if self.path is None else self._start_file(self.path)
@@ -167,12 +176,71 @@ class RealSenseCamera:
         self._guard = DeviceGuard(self._stop)
 
     def _start_file(self, path: Path) -> Any:
-        config = self.rs.config()
-        config.enable_device_from_file(str(path), repeat_playback=False)
+        # a file plays at the pace its frames are read, none dropped: its sensor (not the
+        # pipeline, whose queues keep only the newest frames) hands each frame to _deliver,
+        # which waits while the reader is behind, and the device is told before it starts
+        rs = self.rs
         try:
-            return self.pipeline.start(config)
-        except RuntimeError as exc:
+            device = rs.context().load_device(str(path))
+            device.as_playback().set_real_time(False)
+            kinds = (rs.stream.depth, rs.stream.infrared)
+            sensor = next(
+                (s for s in device.query_sensors()
+                 if any(p.stream_type() == rs.stream.depth for p in s.get_stream_profiles())),
+                device.query_sensors()[0],
+            )  # fmt: skip
+            profiles = [
+                p
+                for p in sensor.get_stream_profiles()
+                if p.stream_type() in kinds
+                and (p.stream_type() == rs.stream.depth or p.stream_index() in (0, 1))
+            ]
+            sensor.open(profiles)
+            sensor.start(self._deliver)
+        except (RuntimeError, IndexError) as exc:
             raise InputError(f"{path}: cannot play this file ({exc})") from None
+        self._sensor = sensor
+        return _FileProfile(device, profiles)
+
+    def _deliver(self, frame: Any) -> None:
+        """A file's frame (librealsense's thread), queued for the reader; the file waits."""
+        frame.keep()
+        while not self._closing.is_set():
+            try:
+                self._played.put(frame, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    def _next_played(self, timeout_ms: int) -> tuple[bool, Any]:
+        """A file's next depth frame, with the IR image of the same number when it has one
+        (as the pipeline's syncer pairs a live camera's)."""
+        rs = self.rs
+        while True:
+            try:
+                frame = self._played.get(timeout=timeout_ms / 1000)
+            except queue.Empty:
+                if self._held is not None and self._playback.current_status() == (
+                    rs.playback_status.stopped
+                ):
+                    held, self._held = self._held, None
+                    return True, _FileFrames(held, None)
+                return False, None
+            number = frame.get_frame_number()
+            if frame.get_profile().stream_type() == rs.stream.infrared:
+                self._irs = {**{k: v for k, v in self._irs.items() if k >= number - 2},
+                             number: frame}  # fmt: skip
+                if self._held is not None and self._held.get_frame_number() == number:
+                    held, self._held = self._held, None
+                    return True, _FileFrames(held, frame)
+                continue
+            held, self._held = self._held, None
+            if held is not None:  # its IR never came: the reader counts it
+                self._held = frame
+                return True, _FileFrames(held, self._irs.get(held.get_frame_number()))
+            if not self.with_ir or number in self._irs:
+                return True, _FileFrames(frame, self._irs.get(number))
+            self._held = frame
 
     def _start_live(self, serial: str | None) -> Any:
         rs = self.rs
@@ -259,7 +327,10 @@ class RealSenseCamera:
                     if not open_:
                         return
                     try:
-                        ok, frames = self.pipeline.try_wait_for_frames(timeout_ms)
+                        if self.live:
+                            ok, frames = self.pipeline.try_wait_for_frames(timeout_ms)
+                        else:
+                            ok, frames = self._next_played(timeout_ms)
                     except RuntimeError as exc:
                         raise DeviceLostError(
                             f"{self.name}: stopped delivering frames ({exc})"
@@ -310,13 +381,47 @@ class RealSenseCamera:
         )
 
     def _stop(self) -> None:
+        self._closing.set()  # a delivery waiting for room gives up: stop() waits for it
         with contextlib.suppress(RuntimeError):
-            self.pipeline.stop()
+            if self._sensor is None:
+                self.pipeline.stop()
+            else:
+                self._sensor.stop()
+                self._sensor.close()
 
     def close(self) -> None:
         """Stop streaming; the pipeline is stopped now, or by the reading thread as soon as
         its wait returns (never under a wait)."""
         self._guard.close()
+
+
+class _FileProfile(NamedTuple):
+    """What a pipeline's profile tells, for a file played through its sensor."""
+
+    device: Any
+    streams: list[Any]
+
+    def get_device(self) -> Any:
+        return self.device
+
+    def get_streams(self) -> list[Any]:
+        return self.streams
+
+    def get_stream(self, kind: Any) -> Any:
+        return next(s for s in self.streams if s.stream_type() == kind)
+
+
+class _FileFrames(NamedTuple):
+    """A file's depth frame and its IR image, as a pipeline's frameset gives them."""
+
+    depth: Any
+    ir: Any
+
+    def get_depth_frame(self) -> Any:
+        return self.depth
+
+    def get_infrared_frame(self, index: int = 1) -> Any:
+        return self.ir
 
 
 def list_realsense() -> list[dict[str, str]]:
