@@ -78,7 +78,7 @@ def main() -> None:
             "http": {"listen": "127.0.0.1:0"},
         }
         (folder / "monitor.yaml").write_text(yaml.safe_dump(config))
-        monitor = Monitor(load_config(folder / "monitor.yaml"), lambda line: None)
+        monitor = Monitor(load_config(folder / "monitor.yaml"))
         monitor.start()
         driver = browser.chromium(1280, 900)
         phases: dict[str, list[float]] = {"nobody": [], "overview": [], "rig page": []}

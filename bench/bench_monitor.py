@@ -62,7 +62,7 @@ def run(n_rigs: int, take: Path, folder: Path, mqtt_url: str | None) -> dict[str
         config["mqtt"] = {"url": mqtt_url}
     path = folder / "monitor.yaml"
     path.write_text(yaml.safe_dump(config))
-    monitor = Monitor(load_config(path), lambda line: None)
+    monitor = Monitor(load_config(path))
     monitor.start()
     try:
         time.sleep(WARMUP_S)  # numba, the first clips, the broker

@@ -4,8 +4,10 @@ for a condition (helpers for tests/test_monitor*.py)."""
 
 from __future__ import annotations
 
+import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +59,38 @@ def monitor_config(folder: Path, rigs: list[dict[str, Any]], **sections: Any) ->
     return path
 
 
-def wait_for(condition: Callable[[], Any], timeout_s: float, every_s: float = 0.05) -> Any:
+PATIENCE_S = 120.0
+"""How long a test waits for what it expects: far beyond what any machine needs (a machine
+three times slower than ours, busy, with numba compiling, still gets there)."""
+
+
+@contextmanager
+def log_lines(level: int = logging.DEBUG) -> Iterator[list[str]]:
+    """Every line the monitor logs (``thermodepth.monitor`` and its parts) while inside, its
+    traceback after it; for fixtures wider than a test (a test itself uses caplog)."""
+    lines: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            text = record.getMessage()
+            if record.exc_info:
+                text += "\n" + logging.Formatter().formatException(record.exc_info)
+            lines.append(text)
+
+    root = logging.getLogger("thermodepth.monitor")
+    handler, before = Collect(level), root.level
+    root.addHandler(handler)
+    root.setLevel(min(level, root.getEffectiveLevel()))
+    try:
+        yield lines
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(before)
+
+
+def wait_for(
+    condition: Callable[[], Any], timeout_s: float = PATIENCE_S, every_s: float = 0.05
+) -> Any:
     """``condition()``'s first true value within ``timeout_s``; AssertionError otherwise."""
     end = time.monotonic() + timeout_s
     while True:

@@ -3,6 +3,7 @@ collects what arrives (helpers for tests/test_mqtt.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import queue
@@ -12,6 +13,7 @@ import subprocess
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -130,7 +132,7 @@ class Collector:
         c.connect("127.0.0.1", broker.port, keepalive=5)
         c.loop_start()
         self.client = c
-        assert self._subscribed.wait(5), "the broker did not acknowledge the subscription"
+        assert self._subscribed.wait(30), "the broker did not acknowledge the subscription"
 
     def drain(
         self, settle_s: float = 0.5, max_s: float = float("inf")
@@ -144,6 +146,21 @@ class Collector:
                 out.append(self.messages.get(timeout=settle_s))
             except queue.Empty:
                 break
+        return out
+
+    def until(
+        self, done: Callable[[list[tuple[str, Any, bool]]], bool], timeout_s: float = 120.0
+    ) -> list[tuple[str, Any, bool]]:
+        """Everything received until ``done(received)`` says so (AssertionError if not
+        within ``timeout_s``, far beyond the need)."""
+        out: list[tuple[str, Any, bool]] = []
+        end = time.monotonic() + timeout_s
+        while not done(out):
+            left = end - time.monotonic()
+            if left <= 0:
+                raise AssertionError(f"not within {timeout_s} s ({len(out)} messages)")
+            with contextlib.suppress(queue.Empty):
+                out.append(self.messages.get(timeout=min(left, 0.5)))
         return out
 
     def close(self) -> None:

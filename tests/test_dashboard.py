@@ -34,7 +34,7 @@ def running(tmp_path_factory: pytest.TempPathFactory) -> Any:
     (folder / "token").write_text("s3cret\n")
     path = monitor_config(folder, [{"name": "a", "source": "sim", "settings": "s.yaml"}],
                           http={"token_file": "token"})  # fmt: skip
-    monitor = Monitor(load_config(path), lambda line: None)
+    monitor = Monitor(load_config(path))
     monitor.start()
     try:
         wait_for(lambda: any(e.get("clip") for e in monitor.store.events(100)), 20)
@@ -204,7 +204,7 @@ def test_tls_with_a_certificate(tmp_path: Path) -> None:
     path = monitor_config(tmp_path, [{"name": "a", "source": "sim"}],
                           http={"token_file": "token", "tls_cert": "cert.pem",
                                 "tls_key": "key.pem"})  # fmt: skip
-    monitor = Monitor(load_config(path), lambda line: None)
+    monitor = Monitor(load_config(path))
     monitor.start()
     try:
         assert monitor.http.url.startswith("https://")

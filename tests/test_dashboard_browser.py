@@ -62,7 +62,7 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Any:
             http={"token_file": "token"},
             mqtt={"url": broker.url("plant"), "connect_timeout_s": 2},
         )
-        monitor = Monitor(load_config(path), lambda line: None)
+        monitor = Monitor(load_config(path))
         monitor.start()
         yield monitor, driver, collector
     finally:

@@ -54,7 +54,7 @@ def test_topics_name_rigs_by_their_path_under_the_prefix() -> None:
 
 
 def test_what_arrives_becomes_rigs_alarms_events_and_pictures(tmp_path: Path) -> None:
-    central = CentralDashboard("mqtt://127.0.0.1:1/plant", tmp_path, MqttSettings(), print)
+    central = CentralDashboard("mqtt://127.0.0.1:1/plant", tmp_path, MqttSettings())
     say = lambda topic, body: central._message(  # noqa: E731
         f"plant/{topic}", body if isinstance(body, bytes) else json.dumps(body).encode()
     )
@@ -153,10 +153,10 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Any:
                 mqtt={"url": broker.url(f"plant/{edge}"), "connect_timeout_s": 2,
                       "snapshots_hz": 2, "client_id": f"monitor-{edge}"},
             )  # fmt: skip
-            monitors[edge] = Monitor(load_config(path), lambda line: None)
+            monitors[edge] = Monitor(load_config(path))
             monitors[edge].start()
         (tmp_path / "token").write_text("s3cret\n")
-        central = CentralDashboard(broker.url("plant"), tmp_path / "central", MqttSettings(), print)
+        central = CentralDashboard(broker.url("plant"), tmp_path / "central", MqttSettings())
         central.start()
         server = HttpServer(
             central, HttpConfig(listen="127.0.0.1:0", token_file=tmp_path / "token")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sqlite3
 import time
 from pathlib import Path
@@ -22,15 +23,17 @@ pytest.importorskip("prometheus_client", reason="the monitor needs the monitor e
 import httpx
 from prometheus_client.parser import text_string_to_metric_families
 
-from monitor_helpers import PAPER_MODEL, monitor_config, settings_file, wait_for
+from monitor_helpers import PAPER_MODEL, log_lines, monitor_config, settings_file, wait_for
 from thermodepth.monitor import Monitor, load_config
+from thermodepth.monitor.http import WEB
 from thermodepth.monitor.store import EventStore
 from thermodepth.pipeline import Pipeline, Settings
 from thermodepth.sources import open_source
 
-RUN_S = 11.0
-SLOW = "sim:faults=unplug@1s+1.5s,stall@4s,corrupt@7s+1.5s"
-ODD = "sim:faults=ffc-storm@1s+3s,vox-ramp@4s"
+# each fault lasts long enough for a rig on a slow, busy machine to see several frames of it
+SLOW = "sim:faults=unplug@1s+1.5s,stall@4s,corrupt@7s+3s"
+ODD = "sim:faults=ffc-storm@2s+4s,vox-ramp@4s"
+PRE_S = 1.0  # monitor_helpers' storage: pre_s
 
 
 class Seen:
@@ -41,17 +44,42 @@ class Seen:
         self.http: dict[str, Any] = {}
 
 
+def everything_happened(monitor: Monitor, t0: float) -> bool:
+    """Every fault the rigs were told to have came and (but the VOx drift) went, and enough
+    alarms with their clips were recorded: however slowly the machine ran them."""
+    stored = monitor.store.events(100_000)
+
+    def got(rig: str, event: str, fault: str) -> int:
+        return sum(e["rig"] == rig and e["event"] == event and e.get("fault") == fault
+                   for e in stored)  # fmt: skip
+
+    raised = [e for e in stored if e["rig"] in "ab" and e["event"] in ("alarm", "escalated")
+              and e["rule"] != "sensor_fault"]  # fmt: skip
+    late_clips = {e["clip"] for e in raised if e["rig"] == "b" and e["time_s"] - t0 > 3.0}
+    return (
+        got("a", "clear", "no_data") >= 2
+        and got("a", "clear", "corrupt") >= 1
+        and got("c", "clear", "shutter") >= 1
+        and got("c", "alarm", "vox_range") >= 1
+        and len(raised) >= 10
+        and len({e["clip"] for e in raised}) >= 4
+        and bool(late_clips)
+        and monitor.runners["a"].status.stalls >= 1
+    )
+
+
 @pytest.fixture(scope="module")
 def seen(tmp_path_factory: pytest.TempPathFactory) -> Seen:
-    """Three simulated rigs for RUN_S seconds: ``a`` unplugged, stalled and corrupt, ``b``
-    healthy, ``c`` with a shutter storm and its sensor drifting out of its model's range."""
+    """Three simulated rigs until everything they were told to do has happened: ``a``
+    unplugged, stalled and corrupt, ``b`` healthy, ``c`` with a shutter storm and its sensor
+    drifting out of its model's range."""
     folder = tmp_path_factory.mktemp("monitor")
     flapping = settings_file(folder)
     paper = settings_file(folder, PAPER_MODEL, "paper.yaml")
     path = monitor_config(
         folder,
         [
-            {"name": "a", "source": SLOW, "settings": flapping.name, "stall_s": 1.0},
+            {"name": "a", "source": SLOW, "settings": flapping.name, "stall_s": 2.0},
             {"name": "b", "source": "sim", "settings": flapping.name, "location": "bay 2"},
             {"name": "c", "source": ODD, "settings": paper.name},
         ],
@@ -70,50 +98,50 @@ def seen(tmp_path_factory: pytest.TempPathFactory) -> Seen:
         pipe = Pipeline(Settings.load(paper), warm.calibration)
         for pair in warm:
             assert pipe.process(pair).on_depth is not None
-    monitor = Monitor(load_config(path), out.lines.append)
-    out.t0 = time.time()  # type: ignore[attr-defined]
-    monitor.start()
-    t0 = time.monotonic()
-    try:
-        url = monitor.http.url
-        client = httpx.Client(base_url=url, timeout=5)
-        out.http["healthy"] = wait_for(
-            lambda: (r := client.get("/healthz")).status_code == 200 and r.json(), 5
-        )
-        # a is unplugged from 1 s to 2.5 s: stale once its stall_s has passed
-        out.http["unplugged"] = wait_for(
-            lambda: (r := client.get("/healthz")).status_code == 503 and r.json(), 5
-        )
-        wait_for(lambda: "latched" in str(client.get("/api/status").json()), 5)
-        csrf = {"X-CSRF-Token": client.get("/api/session").json()["csrf"]}
-        out.http["ack_forged"] = client.post(
-            "/api/ack", json={"rig": "b", "rule": "latched", "by": "mallory"}
-        )
-        out.http["ack_form"] = client.post(
-            "/api/ack", content='{"rig": "b", "rule": "latched", "by": "mallory"}',
-            headers={**csrf, "Content-Type": "text/plain"},
-        )  # fmt: skip
-        out.http["ack_unknown_rig"] = client.post(
-            "/api/ack", json={"rig": "z", "rule": "latched", "by": "jane"}, headers=csrf
-        )
-        out.http["ack_unknown_rule"] = client.post(
-            "/api/ack", json={"rig": "b", "rule": "melt", "by": "jane"}, headers=csrf
-        )
-        out.http["ack_bad"] = client.post(
-            "/api/ack", json={"rig": "b", "rule": "latched"}, headers=csrf
-        )
-        out.http["ack"] = client.post(
-            "/api/ack", json={"rig": "b", "rule": "latched", "by": "operator jane"}, headers=csrf
-        )
-        time.sleep(max(0.0, RUN_S - (time.monotonic() - t0)))
-        out.http["status"] = client.get("/api/status").json()
-        out.http["events"] = client.get("/api/events", params={"limit": 1000}).json()
-        out.http["page"] = client.get("/api/events", params={"limit": 5, "rig": "a"}).json()
-        out.http["metrics"] = client.get("/metrics").text
-        out.http["bad_limit"] = client.get("/api/events", params={"limit": "x"})
-        client.close()
-    finally:
-        monitor.stop()
+    with log_lines() as out.lines:
+        monitor = Monitor(load_config(path))
+        out.t0 = time.time()  # type: ignore[attr-defined]
+        monitor.start()
+        try:
+            client = httpx.Client(base_url=monitor.http.url, timeout=30)
+            out.http["healthy"] = wait_for(
+                lambda: (r := client.get("/healthz")).status_code == 200 and r.json()
+            )
+            # a is unplugged from 1 s to 2.5 s: stale once its stall_s has passed
+            out.http["unplugged"] = wait_for(
+                lambda: (r := client.get("/healthz")).status_code == 503 and r.json()
+            )
+            wait_for(lambda: "latched" in str(client.get("/api/status").json()))
+            csrf = {"X-CSRF-Token": client.get("/api/session").json()["csrf"]}
+            out.http["ack_forged"] = client.post(
+                "/api/ack", json={"rig": "b", "rule": "latched", "by": "mallory"}
+            )
+            out.http["ack_form"] = client.post(
+                "/api/ack", content='{"rig": "b", "rule": "latched", "by": "mallory"}',
+                headers={**csrf, "Content-Type": "text/plain"},
+            )  # fmt: skip
+            out.http["ack_unknown_rig"] = client.post(
+                "/api/ack", json={"rig": "z", "rule": "latched", "by": "jane"}, headers=csrf
+            )
+            out.http["ack_unknown_rule"] = client.post(
+                "/api/ack", json={"rig": "b", "rule": "melt", "by": "jane"}, headers=csrf
+            )
+            out.http["ack_bad"] = client.post(
+                "/api/ack", json={"rig": "b", "rule": "latched"}, headers=csrf
+            )
+            out.http["ack"] = client.post(
+                "/api/ack", json={"rig": "b", "rule": "latched", "by": "operator jane"},
+                headers=csrf,
+            )  # fmt: skip
+            wait_for(lambda: everything_happened(monitor, out.t0))  # type: ignore[attr-defined]
+            out.http["status"] = client.get("/api/status").json()
+            out.http["events"] = client.get("/api/events", params={"limit": 1000}).json()
+            out.http["page"] = client.get("/api/events", params={"limit": 5, "rig": "a"}).json()
+            out.http["metrics"] = client.get("/metrics").text
+            out.http["bad_limit"] = client.get("/api/events", params={"limit": "x"})
+            client.close()
+        finally:
+            monitor.stop()
     out.status = monitor.status()  # type: ignore[attr-defined]
     out.store = EventStore(folder / "store" / "events.sqlite")  # type: ignore[attr-defined]
     return out
@@ -133,16 +161,19 @@ def rig_status(seen: Seen, rig: str) -> dict[str, Any]:
 
 
 def test_unplug_and_stall_are_reopened_counted_and_fail_safe(seen: Seen) -> None:
+    # (a machine starved of CPU may add stalls of its own: at least these)
     a = rig_status(seen, "a")
-    assert a["stalls"] == 1  # the stall at 4 s, seen by the monitor's clock
+    assert a["stalls"] >= 1  # the stall at 4 s, seen by the monitor's clock
     assert a["reconnects"] >= 2  # after the unplugging and after the stall
     assert a["seconds_without_data"] > 0.5
     got = faults(seen, "a")
     # unplugged and stalled: no data, each raised and cleared when frames came back
-    assert got.count(("alarm", "no_data")) == 2 and got.count(("clear", "no_data")) == 2
+    raised, cleared = got.count(("alarm", "no_data")), got.count(("clear", "no_data"))
+    assert raised >= 2 and cleared >= 2 and raised - cleared in (0, 1)
+    assert [e for e, _ in got if _ == "no_data"][:4] == ["alarm", "clear", "alarm", "clear"]
     assert any("device lost: sim: unplugged at 1 s" in line for line in seen.lines)
-    assert any(line.startswith("a: stalled (no new frame for 1.") for line in seen.lines)
-    assert a["frames"] > 40
+    assert any(line.startswith("a: stalled (no new frame for 2.") for line in seen.lines)
+    assert a["frames"] > 20
 
 
 def test_corrupt_frames_raise_and_clear_a_sensor_fault(seen: Seen) -> None:
@@ -171,13 +202,13 @@ def test_shutter_storm_and_vox_drift_raise_sensor_faults(seen: Seen) -> None:
 
 
 def test_the_healthy_rig_is_unaffected(seen: Seen) -> None:
+    # while a and c misbehaved, b had no fault, was never reopened, stalled or without data
+    # (a machine short of CPU may make it drop pairs to keep its pace: that is allowed)
     b = rig_status(seen, "b")
     assert faults(seen, "b") == []
     assert b["reconnects"] == 0 and b["stalls"] == 0 and b["seconds_without_data"] == 0
-    assert b["frames"] >= 0.9 * 8.7 * RUN_S  # no gap while a and c misbehaved
-    running = next(r for r in seen.http["status"]["rigs"] if r["name"] == "b")
-    assert abs(running["fps"] - 8.7) < 1.0  # while it ran (a busy machine: late frames bunch)
-    assert b["dropped"] == 0
+    assert b["frames"] > 20 and b["last_error"] is None
+    assert not [line for line in seen.lines if line.startswith("b: ") and "reopening" in line]
 
 
 def test_every_event_is_stored_and_every_alarm_has_a_clip_that_replays(seen: Seen) -> None:
@@ -213,14 +244,18 @@ def test_a_clip_holds_the_seconds_before_its_first_event(seen: Seen) -> None:
     clip, times_s = next((c, t) for c, t in by_clip.items() if min(t) - seen.t0 > 3.0)  # type: ignore[attr-defined]
     path = seen.folder / "store" / "clips" / clip / "clip.zarr"  # type: ignore[attr-defined]
     with open_source(f"recording:{path}") as src:
-        frames_s = [p.thermal_time_s for p in src]
-    assert min(times_s) - frames_s[0] == pytest.approx(1.0, abs=0.15)  # pre_s, to a frame
+        frames_s = np.array([p.thermal_time_s for p in src])
+    before_s = min(times_s) - frames_s[0]
+    # pre_s before it, to within the gap between two of the rig's pairs (a busy machine may
+    # have dropped some), never more
+    gap_s = float(np.diff(frames_s[frames_s <= min(times_s) + 1e-4]).max())
+    assert PRE_S - gap_s - 1e-3 <= before_s <= PRE_S + 1e-3
     assert frames_s[-1] - max(times_s) <= 1.0 + 1e-3  # post_s
 
 
 def test_healthz_says_which_rig_is_stale(seen: Seen) -> None:
     assert seen.http["healthy"] == {"status": "ok"}
-    assert seen.http["unplugged"] == {"status": "stale", "rigs": ["a"]}
+    assert seen.http["unplugged"] == {"status": "stale", "rigs": ["a"], "workers": []}
 
 
 def test_acknowledge_over_http(seen: Seen) -> None:
@@ -246,7 +281,7 @@ def test_status_and_events_over_http(seen: Seen) -> None:
     assert [r["name"] for r in status["rigs"]] == ["a", "b", "c"]
     b = status["rigs"][1]
     assert b["location"] == "bay 2" and b["up"] == 1 and b["vox_temp_c"] == 35.0
-    assert b["pipeline_ms"]["median"] > 0 and b["last_frame_age_s"] < 0.5
+    assert b["pipeline_ms"]["median"] > 0 and 0 <= b["last_frame_age_s"] < 3.0  # its stall_s
     assert status["storage"]["event_store_bytes"] > 0
     events = seen.http["events"]
     ids = [e["id"] for e in events]
@@ -267,44 +302,80 @@ def test_metrics_read_by_prometheus_own_parser(seen: Seen) -> None:
     assert value("thermodepth_rig_stalls_total", rig="a") == 1
     assert value("thermodepth_rig_reconnects_total", rig="b") == 0
     assert value("thermodepth_rig_up", rig="b") == 1
-    assert value("thermodepth_rig_frames_total", rig="b") > 80
+    frames = value("thermodepth_rig_frames_total", rig="b")
+    assert 20 < frames <= rig_status(seen, "b")["frames"]  # read before the end
     assert value("thermodepth_rig_alarms_active", rig="c", level="alarm") >= 1
     assert value("thermodepth_events_total", rig="a", state="alarm") >= 3
     assert value("thermodepth_event_store_bytes") > 0
     row = value("thermodepth_alarm_latency_seconds", to="event_row", quantile="0.5")
-    assert 0 < row < 0.2 and not math.isnan(row)
+    assert row > 0 and math.isfinite(row)  # how fast is bench_monitor's to say
+    workers = {s.labels["worker"]: s.value for s in samples
+               if s.name == "thermodepth_worker_up"}  # fmt: skip
+    assert set(workers) >= {"clock", "storage", "evidence pictures", "http"}
+    assert all(v == 1 for v in workers.values())
 
 
-def test_a_token_guards_everything_but_healthz(tmp_path: Path) -> None:
+def concrete(path: str) -> str:
+    """A route's path with its parameters filled in."""
+    fill = {"id": "1", "what": "snapshot.png", "rig": "t"}
+    return re.sub(r"\{(\w+)(:\w+)?\}", lambda m: fill.get(m.group(1), "x"), path)
+
+
+def test_every_route_but_the_public_ones_wants_the_token(tmp_path: Path) -> None:
+    from starlette.routing import Mount, Route
+
+    from thermodepth.monitor.http import PUBLIC
+
     (tmp_path / "token").write_text("s3cret\n", encoding="utf-8")
     path = monitor_config(
         tmp_path,
         [{"name": "t", "source": "sim", "settings": settings_file(tmp_path).name}],
         http={"token_file": "token"},
     )
-    monitor = Monitor(load_config(path), lambda line: None)
+    monitor = Monitor(load_config(path))
     monitor.start()
     try:
-        with httpx.Client(base_url=monitor.http.url, timeout=5) as client:
-            assert client.get("/api/status").status_code == 401
-            assert client.get("/metrics").status_code == 401
-            wrong = {"Authorization": "Bearer nope"}
-            assert client.get("/api/events", headers=wrong).status_code == 401
+        asked = []
+        for route in monitor.http.app.routes:  # the app's own table: a new route is walked too
+            if isinstance(route, Mount):
+                asked += [("GET", f"{route.path}/{f.name}") for f in WEB.iterdir()]
+            else:
+                assert isinstance(route, Route)
+                methods = sorted((route.methods or {"GET"}) - {"HEAD"})
+                asked += [(m, concrete(route.path)) for m in methods]
+        assert {p for _, p in asked} >= {"/api/openapi.json", "/metrics", "/static/app.js"}
+        with httpx.Client(base_url=monitor.http.url, timeout=30) as client:
+            for method, where in asked:
+                got = client.request(method, where)
+                if where in PUBLIC:
+                    assert got.status_code != 401, where
+                else:
+                    assert got.status_code == 401, (method, where, got.status_code)
+            none = client.get("/api/openapi.json")
+            assert none.json() == {"error": "a token is needed"}
+            assert none.headers["www-authenticate"] == 'Bearer realm="thermodepth"'
+            wrong = client.get("/api/events", headers={"Authorization": "Bearer nope"})
+            assert wrong.status_code == 401 and wrong.json() == {"error": "wrong token"}
+            assert 'error="invalid_token"' in wrong.headers["www-authenticate"]
+            ended = client.get("/api/status", cookies={"thermodepth_session": "gone"})
+            assert "log in again" in ended.json()["error"]
+            page = client.get("/rig/t", headers={"Accept": "text/html"})
+            assert page.status_code == 401 and 'url=/login?next=/rig/t"' in page.text
             right = {"Authorization": "Bearer s3cret"}
             assert client.get("/api/status", headers=right).status_code == 200
-            assert client.get("/healthz").status_code in (200, 503)
+            schema = client.get("/api/openapi.json", headers=right).json()
+            assert "/api/status" in schema["paths"]
     finally:
         monitor.stop()
 
 
 def test_events_the_store_cannot_take_are_kept_published_and_written_later(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     path = monitor_config(
         tmp_path, [{"name": "t", "source": "sim", "settings": settings_file(tmp_path).name}]
     )
-    lines: list[str] = []
-    monitor = Monitor(load_config(path), lines.append)
+    monitor = Monitor(load_config(path))
     real_add = monitor.store.add
 
     def full(event: dict[str, Any], outbox: bool = False) -> int:
@@ -312,9 +383,9 @@ def test_events_the_store_cannot_take_are_kept_published_and_written_later(
 
     monitor.start()
     try:
-        wait_for(lambda: monitor.store.count() >= 2, 10)
+        wait_for(lambda: monitor.store.count() >= 2)
         monkeypatch.setattr(monitor.store, "add", full)
-        wait_for(lambda: len(monitor.backlog) >= 4, 10)
+        wait_for(lambda: len(monitor.backlog) >= 4)
         with httpx.Client(base_url=monitor.http.url, timeout=5) as client:
             shown = client.get("/api/events").json()
         waiting = [e for e in shown if "id" not in e]
@@ -333,9 +404,10 @@ def test_events_the_store_cannot_take_are_kept_published_and_written_later(
         stored = monitor.store.events(1000)
         assert {"alarm", "clear"} <= {e["event"] for e in stored if e["rule"] == "storage_fault"}
         monkeypatch.setattr(monitor.store, "add", full)
-        wait_for(lambda: monitor.backlog, 10)
+        wait_for(lambda: monitor.backlog)
     finally:
         monitor.stop()  # a disk still full: the log keeps what could not be written
+    lines = [r.getMessage() for r in caplog.records if r.name == "thermodepth.monitor"]
     at = next(i for i, line in enumerate(lines) if "events could not be written to" in line)
     assert all(json.loads(line)["rig"] in ("t", "monitor") for line in lines[at + 1 :])
     assert len(lines) > at + 1

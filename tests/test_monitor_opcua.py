@@ -16,7 +16,7 @@ pytest.importorskip("asyncua", reason="the OPC UA server needs the opcua extra (
 
 from asyncua import Client, ua
 
-from monitor_helpers import FLAPPING, monitor_config, settings_file, wait_for
+from monitor_helpers import FLAPPING, PATIENCE_S, monitor_config, settings_file, wait_for
 from thermodepth.monitor import Monitor, load_config
 from thermodepth.pipeline import Pipeline, Settings
 from thermodepth.session import record_session
@@ -37,14 +37,14 @@ def start(folder: Path, rigs: list[dict[str, Any]], **opcua: Any) -> tuple[Monit
         http={"listen": None},
         opcua={"endpoint": endpoint, "users_file": "users.yaml", **opcua},
     )
-    monitor = Monitor(load_config(path), lambda line: None)
+    monitor = Monitor(load_config(path))
     monitor.start()
     return monitor, endpoint
 
 
 async def read(endpoint: str, paths: list[str], user: str = "jane", password: str = "s3cret",
                security: str | None = None) -> dict[str, Any]:  # fmt: skip
-    client = Client(endpoint)
+    client = Client(endpoint, timeout=30)
     if user:
         client.set_user(user)
         client.set_password(password)
@@ -61,24 +61,30 @@ async def read(endpoint: str, paths: list[str], user: str = "jane", password: st
 def test_values_equal_the_measurements_of_the_same_frame(tmp_path: Path) -> None:
     take = tmp_path / "take.zarr"
     record_session(open_source("sim", frames=12), take)
-    monitor, endpoint = start(
-        tmp_path, [{"name": "r", "source": f"recording:{take}", "pace": "fast"}]
-    )
-    try:
-        wait_for(lambda: monitor.runners["r"].status.state == "ended", 30)
-        time.sleep(1.0)  # the last frame held back is written by the clock
-        got = asyncio.run(read(endpoint, [
-            "r.Hottest", "r.VoxTemperature", "r.Rois.plate.Max", "r.Rois.plate.Mean",
-            "r.Rois.plate.Min", "r.Rois.nothing.Max", "r.Alarms.latched.Raised",
-            "r.Alarms.latched.Level", "r.Alarms.latched.State", "r.Health",
-        ]))  # fmt: skip
-    finally:
-        monitor.stop()
+    settings_file(tmp_path, FLAPPING + ROIS)
     # the same recording measured apart, as `run` would
     with open_source(f"recording:{take}") as src:
         pipe = Pipeline(Settings.load(tmp_path / "s.yaml"), src.calibration)
         last = [pipe.process(p) for p in src][-1]
     plate = next(r for r in last.rois if r.name == "plate")
+    monitor, endpoint = start(
+        tmp_path, [{"name": "r", "source": f"recording:{take}", "pace": "fast"}]
+    )
+
+    def the_last_frame() -> dict[str, Any] | None:  # held back, it is written by the clock
+        got = asyncio.run(read(endpoint, [
+            "r.Hottest", "r.VoxTemperature", "r.Rois.plate.Max", "r.Rois.plate.Mean",
+            "r.Rois.plate.Min", "r.Rois.nothing.Max", "r.Alarms.latched.Raised",
+            "r.Alarms.latched.Level", "r.Alarms.latched.State", "r.Health",
+        ]))  # fmt: skip
+        stamp = got["r.Rois.plate.Max"].SourceTimestamp
+        return got if stamp and abs(stamp.timestamp() - last.thermal_time_s) < 1e-3 else None
+
+    try:
+        wait_for(lambda: monitor.runners["r"].status.state == "ended")
+        got = wait_for(the_last_frame, every_s=0.2)
+    finally:
+        monitor.stop()
     assert got["r.Hottest"].Value.Value == last.hotspots[0].max_c
     assert got["r.VoxTemperature"].Value.Value == last.vox_temp_c
     assert got["r.Rois.plate.Max"].Value.Value == plate.max_c
@@ -94,8 +100,9 @@ def test_values_equal_the_measurements_of_the_same_frame(tmp_path: Path) -> None
     assert got["r.Health"].Value.Value == "ok"  # an ended replay is not stale
 
 
-async def events_of(endpoint: str, seconds: float) -> list[Any]:
-    client = Client(endpoint)
+async def events_of(endpoint: str) -> list[Any]:
+    """The rig's OPC UA events until an alarm and a clear of ``hot`` have come."""
+    client = Client(endpoint, timeout=30)
     client.set_user("jane")
     client.set_password("s3cret")
     got: list[Any] = []
@@ -109,15 +116,19 @@ async def events_of(endpoint: str, seconds: float) -> list[Any]:
         rig = client.get_node(f"ns={ns};s=a")
         sub = await client.create_subscription(50, Handler())
         await sub.subscribe_events(rig)
-        await asyncio.sleep(seconds)
+        end = time.monotonic() + PATIENCE_S
+        while time.monotonic() < end and not {"ALARM", "CLEAR"} <= {
+            e.Message.Text.split()[0] for e in got if e.SourceName == "hot"
+        }:
+            await asyncio.sleep(0.1)
     return got
 
 
 def test_alarm_events_and_who_may_connect(tmp_path: Path) -> None:
     monitor, endpoint = start(tmp_path, [{"name": "a", "source": "sim"}])
     try:
-        wait_for(lambda: monitor.store.count() >= 2, 15)
-        events = asyncio.run(events_of(endpoint, 3.0))
+        wait_for(lambda: monitor.store.count() >= 2)
+        events = asyncio.run(events_of(endpoint))
         with pytest.raises(ua.UaStatusCodeError, match="BadUserAccessDenied"):
             asyncio.run(read(endpoint, ["a.Health"], password="wrong"))
         with pytest.raises(ua.UaStatusCodeError, match=r"\(BadIdentityTokenRejected\)"):
@@ -145,14 +156,14 @@ def test_basic256sha256_with_the_servers_own_certificate(tmp_path: Path) -> None
         tmp_path, [{"name": "a", "source": "sim"}], security=["basic256sha256"]
     )
     try:
-        wait_for(lambda: monitor.runners["a"].status.frames > 3, 15)
+        wait_for(lambda: monitor.runners["a"].status.frames > 3)
         secure = f"Basic256Sha256,SignAndEncrypt,{cert},{key}"
 
         def once_up() -> dict[str, Any] | None:  # the server's values follow the rig's status
             got = asyncio.run(read(endpoint, ["a.Health", "a.Up"], security=secure))
             return got if got["a.Up"].Value.Value else None
 
-        got = wait_for(once_up, 20, every_s=0.5)
+        got = wait_for(once_up, every_s=0.5)
         with pytest.raises(Exception):  # noqa: B017  no policy "none" offered
             asyncio.run(read(endpoint, ["a.Health"]))
     finally:

@@ -6,6 +6,7 @@ and the CLI's --check."""
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import sqlite3
 import time
@@ -19,7 +20,9 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from monitor_helpers import monitor_config
+from monitor_helpers import FLAPPING, monitor_config, settings_file
+from thermodepth.compensation import preset
+from thermodepth.compensation.files import save_model
 from thermodepth.errors import InputError
 from thermodepth.frames import FfcState, Telemetry, match_of
 from thermodepth.monitor.config import FailsafeConfig, StorageConfig, load_config
@@ -36,10 +39,44 @@ from thermodepth.sources import open_source
 # -- the config ---------------------------------------------------------------------------------
 
 
-def test_the_example_config_is_valid() -> None:
-    config = load_config(Path(__file__).parents[1] / "examples" / "monitor.yaml")
+EXAMPLES = Path(__file__).parents[1] / "examples"
+
+
+def test_the_example_config_is_valid_beside_the_files_its_settings_name(tmp_path: Path) -> None:
+    # as it is, its settings name a calibration and a model that a rig's folder will hold:
+    # said, each with the rig, the settings file and the key (not "OK", then a failed start)
+    with pytest.raises(InputError) as info:
+        load_config(EXAMPLES / "monitor.yaml")
+    assert str(info.value).splitlines()[:2] == [
+        f"{EXAMPLES / 'monitor.yaml'}: rigs.0 (cabinet-4).settings: "
+        f"{EXAMPLES / 'settings.yaml'}: calibration: {EXAMPLES / 'calib.yaml'}: cannot read "
+        "(No such file or directory)",
+        f"{EXAMPLES / 'monitor.yaml'}: rigs.0 (cabinet-4).settings: "
+        f"{EXAMPLES / 'settings.yaml'}: compensation: {EXAMPLES / 'model.json'}: cannot read "
+        "(No such file or directory)",
+    ]
+    for name in ("monitor.yaml", "settings.yaml"):
+        shutil.copy(EXAMPLES / name, tmp_path / name)
+    shutil.copy(EXAMPLES / "calibration.yaml", tmp_path / "calib.yaml")
+    save_model(preset("paper2022"), tmp_path / "model.json")
+    config = load_config(tmp_path / "monitor.yaml")
     assert [r.name for r in config.rigs] == ["cabinet-4", "rehearsal"]
     assert config.http.listen == "127.0.0.1:8088" and config.storage.pre_s == 10
+
+
+def test_a_settings_file_naming_a_broken_model_or_calibration_is_refused(tmp_path: Path) -> None:
+    (tmp_path / "broken.json").write_text("{", encoding="utf-8")
+    settings_file(tmp_path, "calibration: nope.yaml\ncompensation: broken.json\n", "s.yaml")
+    path = monitor_config(tmp_path, [{"name": "press7", "source": "sim", "settings": "s.yaml"}])
+    with pytest.raises(InputError) as info:
+        load_config(path)
+    lines = str(info.value).splitlines()
+    where = f"{path}: rigs.0 (press7).settings: {tmp_path / 's.yaml'}"
+    assert lines[0] == (
+        f"{where}: calibration: {tmp_path / 'nope.yaml'}: cannot read (No such file or directory)"
+    )
+    assert lines[1].startswith(f"{where}: compensation: {tmp_path / 'broken.json'}: ")
+    assert len(lines) == 2
 
 
 def test_every_problem_of_a_config_is_a_line(tmp_path: Path) -> None:
@@ -107,12 +144,40 @@ def test_monitor_check_says_what_the_config_sets_up(tmp_path: Path, cli_process:
     done = cli_process("monitor", str(path), "--check")
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines() == [
-        "1 rigs:",
+        "1 rig:",
         "  a at bay 1: sim with default settings",
+        "    ROIs: none; alarm rules: none",
+        "    calibration: none",
+        "    compensation: none",
         f"storage {tmp_path / 'store'}: clips of events, 1 s before and 1 s after; kept 30 "
         "days, 1 GB left free",
         "HTTP on 127.0.0.1:0",
-        "no MQTT",
+        "no outputs (MQTT, OPC UA): the dashboard and the log only",
+        "log level info",
+        f"{path}: OK",
+    ]
+    settings_file(tmp_path, FLAPPING + "rois:\n  - {name: plate, rect: [0, 0, 10, 10]}\n")
+    (tmp_path / "users.yaml").write_text("jane: s3cret\n", encoding="utf-8")
+    path = monitor_config(
+        tmp_path,
+        [{"name": "a", "source": "sim", "settings": "s.yaml"}],
+        mqtt={"url": "mqtt://broker:1883/plant", "homeassistant": True},
+        opcua={"users_file": "users.yaml"},
+        log={"level": "warning", "rigs": {"a": "debug"}},
+    )
+    lines = cli_process("monitor", str(path), "--check").stdout.splitlines()
+    assert lines[2:5] == [
+        "    ROIs: plate; alarm rules: hot (above 67.48 C for 1 frame), latched (above 60 C "
+        "for 1 frame, latched until acknowledged)",
+        "    calibration: none",
+        "    compensation: none",
+    ]
+    assert lines[-4:] == [
+        "MQTT mqtt://broker:1883/plant (readings 1/s, snapshots 1/s); Home Assistant "
+        "discovery on (under homeassistant/)",
+        f"OPC UA opc.tcp://127.0.0.1:4840/thermodepth (security none, basic256sha256; users "
+        f"from {tmp_path / 'users.yaml'})",
+        "log level warning (a debug)",
         f"{path}: OK",
     ]
     path.write_text("rigs: []\nstorage: {path: s}\n", encoding="utf-8")

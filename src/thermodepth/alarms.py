@@ -327,10 +327,12 @@ def _event(
 
 def event_line(event: dict[str, Any]) -> str:
     """An event as a line for people: ``ALARM hot [alarm]: 61.2 C (above 60 C for 5
-    frames), frame 12``; an acknowledgement says by whom."""
+    frames), frame 12``; an acknowledgement says by whom; an event of no frame (a rig that
+    never delivered one) names none."""
     value = "" if event.get("value_c") is None else f": {event['value_c']} C"
     who = f" by {event['by']}" if event["event"] == "acknowledged" else ""
+    frame = "" if event.get("frame") is None else f", frame {event['frame']}"
     return (
         f"{event['event'].upper()} {event['rule']} [{event.get('level', 'alarm')}]{value} "
-        f"({event.get('condition', '')}){who}, frame {event['frame']}"
+        f"({event.get('condition', '')}){who}{frame}"
     )

@@ -5,11 +5,9 @@ publish to a broker (:mod:`thermodepth.monitor.central`)."""
 from __future__ import annotations
 
 import signal
-import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from datetime import datetime, timezone
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -17,18 +15,31 @@ from typing import Any
 from ..errors import InputError, ThermodepthError
 from ..monitor import Monitor, MonitorConfig, load_config
 from ..monitor.config import HttpConfig, http_problems
+from ..monitor.logs import install_handler, logger
+from ..monitor.outputs import describe_outputs
 from ..monitor.systemd import notify, reloading
-from ..pipeline import MqttSettings
+from ..pipeline import MqttSettings, Settings
 
 
 def describe_config(config: MonitorConfig) -> list[str]:
-    """What a valid config sets up, a line each (``monitor --check``)."""
+    """What a valid config would start, a line each (``monitor --check``): each rig with its
+    source, settings, ROIs and alarm rules; the storage; the HTTP server; every output
+    (Home Assistant discovery on or off); the log's levels."""
     s = config.storage
-    lines = [f"{len(config.rigs)} rigs:"]
+    lines = [f"{len(config.rigs)} rig{'s' if len(config.rigs) > 1 else ''}:"]
     for rig in config.rigs:
         where = f" at {rig.location}" if rig.location else ""
-        settings = rig.settings or "default settings"
-        lines.append(f"  {rig.name}{where}: {rig.source} with {settings}")
+        lines.append(f"  {rig.name}{where}: {rig.source} with {rig.settings or 'default settings'}")
+        settings = Settings.load(rig.settings) if rig.settings else Settings()
+        rois = ", ".join(r.name for r in settings.rois) or "none"
+        rules = ", ".join(
+            f"{a.name} ({a.rule().condition()}{', latched until acknowledged' * a.latch})"
+            for a in settings.alarms
+        )
+        lines.append(f"    ROIs: {rois}; alarm rules: {rules or 'none'}")
+        for key in ("calibration", "compensation"):
+            path = getattr(settings, key)
+            lines.append(f"    {key}: {path if path else 'none'}")
     keep = "everything (rolling) and clips" if s.continuous else "clips of events"
     lines.append(
         f"storage {s.path}: {keep}, {s.pre_s:g} s before and {s.post_s:g} s after; kept "
@@ -40,14 +51,11 @@ def describe_config(config: MonitorConfig) -> list[str]:
         if http.listen is None
         else f"HTTP on {http.listen}" + (" with a bearer token" if http.token_file else "")
     )
-    lines.append("no MQTT" if config.mqtt is None else f"MQTT {config.mqtt.url}")
+    outputs = describe_outputs(config)
+    lines.extend(outputs or ["no outputs (MQTT, OPC UA): the dashboard and the log only"])
+    rig_levels = ", ".join(f"{k} {v}" for k, v in config.log.rigs.items())
+    lines.append(f"log level {config.log.level}" + (f" ({rig_levels})" if rig_levels else ""))
     return lines
-
-
-def log_line(line: str) -> None:
-    """A line of the monitor's log on stderr, stamped in UTC."""
-    now = datetime.now(timezone.utc).isoformat(timespec="milliseconds")
-    print(f"{now} {line}", file=sys.stderr, flush=True)
 
 
 @contextmanager
@@ -72,11 +80,14 @@ def until_signalled(on_hangup: Callable[[], None] | None = None) -> Iterator[thr
             signal.signal(sig, handler)
 
 
-def run_monitor(path: Path, log: Callable[[str], None] = log_line) -> None:
+def run_monitor(path: Path) -> None:
     """Run the monitor of the config at ``path`` until SIGTERM or SIGINT (Ctrl-C); SIGHUP
     reloads the config (a bad one is refused with its lines and the running one goes on).
-    Tells systemd when it is ready, reloading and stopping. Call it from the main thread."""
-    monitor = Monitor(load_config(path), log)
+    Tells systemd when it is ready, reloading and stopping; logs on stderr
+    (:mod:`thermodepth.monitor.logs`). Call it from the main thread."""
+    install_handler()
+    log = logger()
+    monitor = Monitor(load_config(path))
     reload = threading.Event()
     with until_signalled(reload.set) as stop:
         try:
@@ -85,12 +96,12 @@ def run_monitor(path: Path, log: Callable[[str], None] = log_line) -> None:
             while not stop.wait(0.2):
                 if reload.is_set():
                     reload.clear()
-                    _reload(monitor, path, log)
-            log("monitor: stopping")
+                    _reload(monitor, path)
+            log.info("monitor: stopping")
         finally:
             notify("STOPPING=1")
             monitor.stop()
-    log("monitor: stopped")
+    log.info("monitor: stopped")
 
 
 def run_dashboard(
@@ -98,7 +109,6 @@ def run_dashboard(
     folder: Path,
     http: HttpConfig,
     mqtt: MqttSettings,
-    log: Callable[[str], None] = log_line,
 ) -> None:
     """Serve the dashboard of every rig publishing under the broker ``url``'s prefix
     (:mod:`thermodepth.monitor.central`), keeping its events in ``folder``, until SIGTERM or
@@ -111,29 +121,32 @@ def run_dashboard(
         problems.append("--listen: the dashboard needs an address to serve")
     if problems:
         raise InputError("\n".join(problems))
-    central = CentralDashboard(url, folder, mqtt, log)
+    install_handler()
+    log = logger("central")
+    central = CentralDashboard(url, folder, mqtt)
     server = HttpServer(central, http)
     with until_signalled() as stop:
         central.start()
         try:
             server.start()
             where = f"{central.target.where}/{central.prefix}"
-            log(f"dashboard: {server.url} for the rigs under {where}")
+            log.info("dashboard: %s for the rigs under %s", server.url, where)
             notify("READY=1")
             stop.wait()
-            log("dashboard: stopping")
+            log.info("dashboard: stopping")
         finally:
             notify("STOPPING=1")
             server.stop()
             central.stop()
-    log("dashboard: stopped")
+    log.info("dashboard: stopped")
 
 
-def _reload(monitor: Monitor, path: Path, log: Callable[[str], None]) -> None:
+def _reload(monitor: Monitor, path: Path) -> None:
     reloading()
+    log = logger()
     try:
         monitor.reload(load_config(path))
-        log(f"monitor: reloaded {path}")
+        log.info("monitor: reloaded %s", path)
     except ThermodepthError as exc:
-        log(f"monitor: {path} not reloaded, the running config goes on:\n{exc}")
+        log.error("monitor: %s not reloaded, the running config goes on:\n%s", path, exc)
     notify("READY=1", f"STATUS=watching {len(monitor.runners)} rigs")

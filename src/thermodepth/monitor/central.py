@@ -14,12 +14,18 @@ topic gives:
   monitor's id: delivery is at least once), each raising one with the rig's latest overlay
   as its snapshot (or its first, for a rig not yet pictured); the active alarms follow them
   at once (the status may be 10 s old);
+- ``RIG/events/recent`` (retained): its latest events, so that a dashboard started later
+  still lists the events behind the alarms it shows active;
 - ``RIG/snapshot/overlay.jpg`` and ``thermal.png``: its live pictures;
-- ``EDGE/monitor/status``: whether the monitor runs (its rigs are stale when it does not);
+- ``EDGE/monitor/status``: whether the monitor runs: a rig whose monitor has **stopped** (said
+  so on its way out) shows as stopped at once, is not stale and cannot be acknowledged; one
+  whose monitor **died** (the broker's last will) is stale;
 - ``RIG/ack/result``: the answer to an acknowledgement sent on ``RIG/ack``.
 
-A rig is stale when its status says so, its monitor is not running, or nothing came from it
-for :data:`SILENT_S`.
+A rig is stale when its status says so, its monitor died, or nothing came from it for
+:data:`SILENT_S`. An empty retained message on ``RIG/status`` (or ``EDGE/monitor/status``)
+retires the rig (every rig of that monitor) from every dashboard: :meth:`CentralDashboard.retire`
+sends them, for a monitor that is gone for good (``POST /api/retire``).
 """
 
 from __future__ import annotations
@@ -32,7 +38,6 @@ import tempfile
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -48,7 +53,8 @@ from ..pipeline import MqttSettings
 from ..sinks.mqtt import MqttConnection, MqttTarget, default_client_id
 from .config import MONITOR
 from .live import Picture, Trend, encode
-from .publish import SNAPSHOTS, STATUS_EVERY_S
+from .logs import logger
+from .outputs.mqtt import SNAPSHOTS, STATUS_EVERY_S
 from .storage import free_bytes
 from .store import EventStore, counts_by_rig
 from .supervisor import AckRefusedError
@@ -56,7 +62,11 @@ from .supervisor import AckRefusedError
 SILENT_S = 2.5 * STATUS_EVERY_S
 ACK_WAIT_S = 5.0
 EVENT_WINS_S = 2.0  # an event newer than this outranks a status published before it
-LEAVES = ("status", "measurements", "alarms", "ack/result", *(f"snapshot/{k}" for k in SNAPSHOTS))
+RECENT = "events/recent"
+LEAVES = ("status", "measurements", "alarms", RECENT, "ack/result",
+          *(f"snapshot/{k}" for k in SNAPSHOTS))  # fmt: skip
+RETAINED = ("status", "alarm_states", RECENT, *(f"snapshot/{k}" for k in SNAPSHOTS))
+"""What a monitor keeps retained for each rig: emptied when the rig is retired."""
 
 
 @dataclass
@@ -103,11 +113,9 @@ class CentralDashboard:
     monitor. ``url``: ``mqtt://[USER@]HOST[:PORT]/PREFIX``; ``folder``: its event store and
     event snapshots; ``settings``: the broker's (password file, CA, timeouts)."""
 
-    def __init__(
-        self, url: str, folder: Path, settings: MqttSettings, log: Callable[[str], None]
-    ) -> None:
+    def __init__(self, url: str, folder: Path, settings: MqttSettings) -> None:
         self.target = MqttTarget.parse(url)
-        self.prefix, self.log = self.target.prefix, log
+        self.prefix, self.log = self.target.prefix, logger("central")
         self.folder = folder
         (folder / "snapshots").mkdir(parents=True, exist_ok=True)
         self.store = EventStore(folder / "events.sqlite")
@@ -123,7 +131,7 @@ class CentralDashboard:
         self._ack_locks: dict[str, threading.Lock] = {}
         will = (f"{self.prefix}/dashboard/status", json.dumps({"state": "died"}))
         client_id = settings.client_id or f"{default_client_id()}-dashboard"
-        self.connection = MqttConnection(self.target, settings, log, will, client_id)
+        self.connection = MqttConnection(self.target, settings, self.log.warning, will, client_id)
 
     # -- the broker ----------------------------------------------------------------------------
 
@@ -145,9 +153,13 @@ class CentralDashboard:
 
     def _message(self, topic: str, payload: bytes) -> None:
         where = split_topic(self.prefix, topic)
-        if where is None or not payload:
+        if where is None:
             return
         rig, leaf = where
+        if not payload:
+            if leaf == "status":  # retired: a rig, or every rig of a monitor
+                self._forget(rig)
+            return
         if leaf.startswith("snapshot/"):
             r = self._rig(rig)
             with self._lock:
@@ -161,7 +173,12 @@ class CentralDashboard:
         try:
             message = json.loads(payload)
         except ValueError:
-            self.log(f"MQTT {topic}: not JSON, ignored")
+            self.log.warning("MQTT %s: not JSON, ignored", topic)
+            return
+        if leaf == RECENT and isinstance(message, list):
+            for event in message:
+                if isinstance(event, dict):
+                    self._event(rig, event, live=False)
             return
         if not isinstance(message, dict):
             return
@@ -184,6 +201,53 @@ class CentralDashboard:
             found = self.rigs.setdefault(rig, RemoteRig())
         found.heard_s = time.monotonic()
         return found
+
+    def _forget(self, name: str) -> None:
+        """A rig retired, or with ``EDGE/monitor``, that monitor and all its rigs."""
+        with self._lock:
+            if name.rpartition("/")[2] == MONITOR:
+                self.monitors.pop(name, None)
+                gone = [r for r in self.rigs if monitor_of(r) == name]
+            else:
+                gone = [name] if name in self.rigs else []
+            for rig in gone:
+                del self.rigs[rig]
+        for rig in gone:
+            self.log.info("%s: retired", rig)
+
+    def monitor_state(self, rig: str) -> str:
+        """The state its monitor last said: ``running``, ``stopped``, ``died``, ...
+        (``running`` when it has not said)."""
+        with self._lock:
+            return self.monitors.get(monitor_of(rig), "running")
+
+    def retire(self, name: str) -> list[str]:
+        """Retire a rig (``edge1/line3``) or a monitor and its rigs (``edge1``, or
+        ``monitor`` for one publishing under the prefix itself) from every dashboard: its
+        retained messages emptied on the broker. Only what is not running can go
+        (AckRefusedError 409; 404: unknown). Returns the rigs retired."""
+        monitor = name if name.rpartition("/")[2] == MONITOR else f"{name}/{MONITOR}"
+        with self._lock:
+            of_monitor = [r for r in self.rigs if monitor_of(r) == monitor]
+            rigs = of_monitor or ([name] if name in self.rigs else [])
+            whole = bool(of_monitor) or monitor in self.monitors
+        if not rigs and not whole:
+            raise AckRefusedError(404, f"no rig or monitor {name!r}")
+        live = [r for r in rigs if r not in self.stale_rigs() and not self._stopped(r)]
+        if live:
+            raise AckRefusedError(409, f"still running: {', '.join(live)}")
+        for rig in rigs:
+            for leaf in RETAINED:
+                self.connection.publish(f"{self.prefix}/{rig}/{leaf}", b"", 1, True)
+        if whole:
+            self.connection.publish(f"{self.prefix}/{monitor}/status", b"", 1, True)
+            self._forget(monitor)
+        for rig in rigs:
+            self._forget(rig)
+        return rigs
+
+    def _stopped(self, rig: str) -> bool:
+        return self.monitor_state(rig) not in ("running", "died")
 
     def _status(self, rig: str, status: dict[str, Any]) -> None:
         r = self._rig(rig)
@@ -210,11 +274,13 @@ class CentralDashboard:
             {k: (v.get("max_c") if v.get("n") else None) for k, v in rois.items()},
         )
 
-    def _event(self, rig: str, event: dict[str, Any]) -> None:
+    def _event(self, rig: str, event: dict[str, Any], live: bool = True) -> None:
+        """An event of a rig, kept once; a ``live`` one (not from the retained recent list)
+        also moves the rig's active alarms and gets the rig's overlay as its snapshot."""
         r = self._rig(rig)
         kind, rule = event.get("event"), event.get("rule")
         if not isinstance(kind, str) or not isinstance(rule, str):
-            self.log(f"MQTT {self.prefix}/{rig}/alarms: not an event, ignored")
+            self.log.warning("MQTT %s/%s/alarms: not an event, ignored", self.prefix, rig)
             return
         copy = {k: v for k, v in event.items() if k not in ("id", "clip_kept")}
         copy.update(rig=rig, origin=f"{rig}#{event.get('id', time.time_ns())}")
@@ -226,6 +292,8 @@ class CentralDashboard:
             return  # had it already (delivered again)
         with self._lock:
             self.event_counts[rig, kind] += 1
+            if not live:
+                return
             r.changed_s[rule] = time.monotonic()
             if kind in RAISED:
                 r.active[rule] = {"rule": rule, "level": copy["level"]}
@@ -260,21 +328,27 @@ class CentralDashboard:
     # -- what the pages ask --------------------------------------------------------------------
 
     def stale_rigs(self) -> list[str]:
-        """The rigs without fresh data: their status says so, their monitor is not running,
-        or nothing came from them for SILENT_S."""
+        """The rigs without fresh data: their status says so, their monitor died, or nothing
+        came from them for SILENT_S; a rig whose monitor stopped on purpose is stopped, not
+        stale."""
         now = time.monotonic()
         with self._lock:
             return [
                 name
                 for name, r in sorted(self.rigs.items())
                 if r.status is not None
+                and self.monitors.get(monitor_of(name), "running") in ("running", "died")
                 and (
                     r.status.get("health") == "stale"
-                    or self.monitors.get(monitor_of(name), "running") != "running"
+                    or self.monitors.get(monitor_of(name), "running") == "died"
                     or now - r.heard_s > SILENT_S
                     or not self.connection.connected
                 )
             ]
+
+    def unhealthy_workers(self) -> list[str]:
+        """None: the dashboard's only loop is the broker client's own."""
+        return []
 
     def status(self) -> dict[str, Any]:
         """``/api/status`` for every rig heard of (those with a status), with the dashboard's
@@ -296,6 +370,10 @@ class CentralDashboard:
                 d["active_alarms"] = [dict(a) for a in r.active.values()]
                 d["up"] = int(name not in stale)
                 d["health"] = "stale" if name in stale else r.status.get("health", "ok")
+                said = self.monitors.get(monitor_of(name), "running")
+                if said != "running":  # what it last told is no longer so
+                    d["state"], d["up"], d["fps"] = said, 0, 0.0
+                    d["last_frame_age_s"] = round(now - max(r.measured_s, r.heard_s), 2)
                 rigs.append(d)
             monitors = dict(sorted(self.monitors.items()))
             counts = dict(self.event_counts)
@@ -354,11 +432,14 @@ class CentralDashboard:
 
     def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]:
         """Acknowledge through the rig's command topic and wait for its monitor's answer:
-        its events, or AckRefusedError (404 no such rig, 409 refused by the monitor, 504 no
-        answer within ACK_WAIT_S)."""
+        its events, or AckRefusedError (404 no such rig, 409 refused by the monitor or its
+        monitor not running, 504 no answer within ACK_WAIT_S)."""
         with self._lock:
             if self.rigs.get(rig) is None or self.rigs[rig].status is None:
                 raise AckRefusedError(404, f"no rig {rig!r}")
+            said = self.monitors.get(monitor_of(rig), "running")
+            if said != "running":
+                raise AckRefusedError(409, f"{rig}: its monitor has {said}: nobody to ask")
             one_at_a_time = self._ack_locks.setdefault(rig, threading.Lock())
         with one_at_a_time:  # the answers of a rig come on one topic
             answers: queue.Queue[dict[str, Any]] = queue.Queue()

@@ -22,6 +22,7 @@ from ..schema import StrictSchema, read_mapping, validation_lines
 from ..sinks.mqtt import MqttTarget, read_password
 from ..sources import check_spec
 from .auth import TOKEN_ENV
+from .logs import Level
 
 RIG_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 MONITOR = "monitor"
@@ -168,6 +169,15 @@ class FailsafeConfig(StrictSchema):
     clear_s: float = Field(default=2.0, ge=0)
 
 
+class LogConfig(StrictSchema):
+    """The log's levels (:mod:`.logs`): ``level`` (``debug``, ``info``, ``warning``,
+    ``error``) for the whole monitor, and ``rigs`` a level of its own for each rig named
+    (``{press7: debug}``)."""
+
+    level: Level = "info"
+    rigs: dict[str, Level] = Field(default_factory=dict)
+
+
 class MonitorConfig(StrictSchema):
     """The whole file (module docstring)."""
 
@@ -177,6 +187,7 @@ class MonitorConfig(StrictSchema):
     mqtt: MqttConfig | None = None
     opcua: OpcUaConfig | None = None
     failsafe: FailsafeConfig = FailsafeConfig()
+    log: LogConfig = LogConfig()
 
 
 def _relative(base: Path, path: Path | None) -> Path | None:
@@ -242,9 +253,30 @@ def _rig_problems(i: int, rig: RigConfig) -> list[str]:
         problems.append(f"{where}.source: {exc}")
     if rig.settings is not None:
         try:
-            Settings.load(rig.settings)
+            settings = Settings.load(rig.settings)
         except ThermodepthError as exc:
             problems.append(f"{where}.settings: {exc}")
+        else:
+            problems.extend(f"{where}.settings: {line}" for line in settings_problems(settings))
+    return problems
+
+
+def settings_problems(settings: Settings) -> list[str]:
+    """What a rig cannot start with in the files its settings lead to, one line each naming
+    the settings file and its key: the calibration and the compensation model, each read
+    as the rig will read it."""
+    from ..calibration import Calibration
+    from ..compensation import load_model
+
+    problems = []
+    for key, path, load in (("calibration", settings.calibration, Calibration.load),
+                            ("compensation", settings.compensation, load_model)):  # fmt: skip
+        if path is None:
+            continue
+        try:
+            load(path)
+        except ThermodepthError as exc:
+            problems.append(f"{settings.where}: {key}: {exc}")
     return problems
 
 
@@ -280,8 +312,9 @@ def http_problems(
 
 def config_problems(config: MonitorConfig) -> list[str]:
     """Every problem of a valid-looking config, one line each: rig names twice, sources,
-    settings files, the listen address, a token where one is needed, the broker's URL and
-    password."""
+    settings files and the calibration and compensation files they name, the listen address,
+    a token where one is needed, the broker's URL and password, OPC UA's users, the log's
+    rigs."""
     problems = []
     twice = repeated(r.name for r in config.rigs)
     if twice:
@@ -299,6 +332,12 @@ def config_problems(config: MonitorConfig) -> list[str]:
         except InputError as exc:
             problems.append(f"mqtt.password_file: {exc}")
     problems.extend(_opcua_problems(config.opcua))
+    names = {r.name for r in config.rigs}
+    problems.extend(
+        f"log.rigs.{rig}: no rig of that name ({', '.join(sorted(names))})"
+        for rig in config.log.rigs
+        if rig not in names
+    )
     return problems
 
 

@@ -32,13 +32,16 @@ from ..io.recording import RecordingWriter
 from ..pipeline import FusedFrame
 from ..sinks.base import RunContext
 from ..sinks.snapshots import write_snapshot
+from .logs import logger
 from .storage import fresh_path, stamp
+from .workers import Worker
 
 _CODEC = Blosc("lz4", 5, Blosc.SHUFFLE)
 Packed = tuple[bytes, tuple[int, ...], str]
 _END = object()
 PICTURES_WAITING = 32
 """Overlays and point clouds waiting to be drawn, at most (each takes about a second)."""
+PAINTER_LIMIT_S = 60.0
 
 
 def _pack(a: np.ndarray | None) -> Packed | None:
@@ -233,17 +236,15 @@ class Evidence:
         post_s: float,
         max_s: float,
         on_fault: Callable[[str], None],
-        log: Callable[[str], None],
     ) -> None:
         self.root, self.pre_s, self.post_s, self.max_s = root, pre_s, post_s, max_s
-        self.on_fault, self.log = on_fault, log
+        self.on_fault, self.log = on_fault, logger("evidence")
         self.pictures_skipped = 0
         self.open: dict[str, Clip] = {}
         self.finished: list[Clip] = []
         self._lock = threading.Lock()
         self._pictures: queue.Queue[Any] = queue.Queue(PICTURES_WAITING)
-        self._painter = threading.Thread(target=self._paint, name="evidence pictures", daemon=True)
-        self._painter.start()
+        self.painter = Worker("evidence pictures", self._paint, 10.0, PAINTER_LIMIT_S, self.log)
 
     def active_folders(self) -> set[Path]:
         """The folders of clips still being written (never deleted by the storage rule)."""
@@ -302,12 +303,23 @@ class Evidence:
             self._pictures.put_nowait((fused, clip.folder, title, range_c))
         except queue.Full:  # a picture of an old event helps no one: the clip is kept
             self.pictures_skipped += 1
-            self.log(f"clip {clip.id}: no overlay or point cloud ({PICTURES_WAITING} waiting)")
+            self.log.warning(
+                "clip %s: no overlay or point cloud (%d waiting)", clip.id, PICTURES_WAITING
+            )
 
-    def _paint(self) -> None:
+    def _paint(self, worker: Worker) -> None:
+        """The painter's loop: every picture queued, until the end is queued (by
+        :meth:`close`)."""
         from ..figures import display_range_c
 
-        while (item := self._pictures.get()) is not _END:
+        while True:
+            worker.beat()
+            try:
+                item = self._pictures.get(timeout=1.0)
+            except queue.Empty:
+                continue
+            if item is _END:
+                return
             fused, folder, title, range_c = item
             try:
                 folder.mkdir(parents=True, exist_ok=True)
@@ -340,7 +352,8 @@ class Evidence:
             for clip in self.open.values():
                 clip.finish()
             self.open.clear()
+        self.painter.stopping.set()  # its loop returns at the end of what is queued
         self._pictures.put(_END)
         for clip in clips:
             clip.join(timeout_s)
-        self._painter.join(timeout_s)
+        self.painter.stop(timeout_s)

@@ -55,7 +55,7 @@ class Fault:
     acknowledged: dict[str, str] | None = None
 
     def update(
-        self, now_s: float, active: bool, detail: str = "", frame: int = -1
+        self, now_s: float, active: bool, detail: str = "", frame: int | None = None
     ) -> dict[str, Any] | None:
         """The fault's event at time ``now_s`` (s) if its state changes, else None."""
         if active:
@@ -79,7 +79,7 @@ class Fault:
             event["acknowledged"] = self.acknowledged
         return event
 
-    def event(self, kind: str, now_s: float, frame: int) -> dict[str, Any]:
+    def event(self, kind: str, now_s: float, frame: int | None) -> dict[str, Any]:
         return {
             "event": kind,
             "rule": self.rule,
@@ -91,7 +91,7 @@ class Fault:
             "value_c": None,
         }
 
-    def acknowledge(self, by: str, now_s: float, frame: int) -> dict[str, Any]:
+    def acknowledge(self, by: str, now_s: float, frame: int | None) -> dict[str, Any]:
         """Who saw it and when (UTC): kept, and told by the event returned."""
         self.acknowledged = {
             "by": by,
@@ -110,7 +110,7 @@ class SensorWatch:
     stall_s: float
     vox_range_c: tuple[float, float] | None
     faults: dict[str, Fault] = field(init=False)
-    last_frame: int = -1
+    last_frame: int | None = None  # none yet: a rig that never delivered
     _shutter: deque[tuple[float, bool]] = field(default_factory=deque)
     _closed_since: float | None = None
 

@@ -9,8 +9,9 @@ route                                      what
 ``/health``                                rig, the events, the monitor's health
 ``GET /login``, ``POST /login``,           the login page (with a token), and leaving
 ``POST /logout``
-``GET /healthz``                           200 while every rig has fresh data, else 503
-                                           naming the rigs that have none (no token: probes)
+``GET /healthz``                           200 while every rig has fresh data and every worker
+                                           of the monitor is well, else 503 naming the rigs
+                                           and workers that are not (no token: probes)
 ``GET /api/status``                        per rig: state, health, frames/s, age of the last
                                            frame, counters, FFC, VOx, hottest reading, ROIs,
                                            active alarms, colour scale; storage, broker,
@@ -28,10 +29,19 @@ route                                      what
 ``POST /api/ack``                          acknowledge ``{"rig", "rule", "by"}``: 200 with
                                            its events, 404 no such rig or rule, 409 not
                                            raised, 403 a forged request
+``POST /api/retire``                       a central dashboard: retire ``{"name"}``, a rig
+                                           (``edge1/line3``) or a monitor with all its rigs
+                                           (``edge1``) that is gone for good; 409 while it
+                                           runs (and on a monitor: rigs leave its config)
 ``GET /metrics``                           Prometheus' text format (:mod:`.metrics`)
 =========================================  ==================================================
 
 Events and their evidence are addressed by id, never by a path.
+
+Every route is guarded by one middleware (:class:`Guard`) that denies by default: only
+:data:`PUBLIC` (``/healthz``, the login page and its two static files) answer without the
+token. A request without it gets 401 (a page: with a link to the login form); one with a
+wrong token, or a session that has expired, gets 401 saying so.
 """
 
 from __future__ import annotations
@@ -40,18 +50,20 @@ import json
 import os
 import socket
 import tempfile
-import threading
 import zipfile
 from importlib.resources import files
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
+from urllib.parse import quote
 
 from .. import __version__
 from ..errors import InputError
 from ..io.measurements import jsonable
 from .auth import COOKIE, SESSION_S, Auth, Identity
 from .config import HttpConfig, read_token
+from .logs import logger
 from .supervisor import AckRefusedError, ClipNotReadyError
+from .workers import Worker
 
 if TYPE_CHECKING:
     from starlette.applications import Starlette
@@ -68,6 +80,9 @@ PAGES = {"/": ("overview", "Overview"), "/events": ("events", "Events"),
 EVIDENCE = {"snapshot.png": "image/png", "cloud.ply": "application/octet-stream",
             "clip.zip": "application/zip"}  # fmt: skip
 PICTURES = {"overlay.jpg": ("overlay", "image/jpeg"), "thermal.png": ("thermal", "image/png")}
+PUBLIC = frozenset({"/healthz", "/login", "/static/login.js", "/static/style.css"})
+"""The only paths that answer without the token (probes, and the way to log in)."""
+HTTP_LIMIT_S = 30.0
 
 
 class Monitor(Protocol):
@@ -76,6 +91,8 @@ class Monitor(Protocol):
     def status(self) -> dict[str, Any]: ...
 
     def stale_rigs(self) -> list[str]: ...
+
+    def unhealthy_workers(self) -> list[str]: ...
 
     def events(
         self,
@@ -97,6 +114,8 @@ class Monitor(Protocol):
     def trend(self, rig: str) -> list[dict[str, Any]] | None: ...
 
     def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]: ...
+
+    def retire(self, name: str) -> list[str]: ...
 
 
 def _json(data: Any, status: int = 200) -> Response:
@@ -122,13 +141,61 @@ def _zip_of(folder: Path) -> Path:
     return Path(name)
 
 
+class Guard:
+    """The ASGI middleware that asks who calls, once, for every route (module docstring):
+    the caller's :class:`~.auth.Identity` goes on to the route as ``request.state.identity``;
+    a path outside :data:`PUBLIC` without one is answered 401 here."""
+
+    def __init__(self, app: Any, auth: Auth) -> None:
+        self.app, self.auth = app, auth
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        from starlette.requests import HTTPConnection
+
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        conn = HTTPConnection(scope)
+        who = self.auth.identity(conn.headers, conn.cookies)
+        if who is None and scope["path"] not in PUBLIC:
+            await refusal(conn, self.auth)(scope, receive, send)
+            return
+        scope.setdefault("state", {})["identity"] = who
+        await self.app(scope, receive, send)
+
+
+def refusal(conn: Any, auth: Auth) -> Response:
+    """The 401 of a request without a way in: why (no token, a wrong one, a session that
+    ended), as JSON for the API and as a page that leads to the login form for a browser."""
+    from starlette.responses import HTMLResponse
+
+    headers = conn.headers
+    if headers.get("authorization"):
+        why, challenge = "wrong token", 'Bearer realm="thermodepth", error="invalid_token"'
+    elif conn.cookies.get(COOKIE):
+        why, challenge = "your session has ended: log in again", 'Bearer realm="thermodepth"'
+    else:
+        why, challenge = "a token is needed", 'Bearer realm="thermodepth"'
+    if conn.scope["method"] == "GET" and "text/html" in headers.get("accept", ""):
+        target = f"/login?next={quote(conn.url.path)}"
+        page = (
+            f'<!doctype html><meta http-equiv="refresh" content="0; url={target}">'
+            f'<title>log in</title><p>{why}: <a href="{target}">log in</a></p>'
+        )
+        response: Response = HTMLResponse(page, 401)
+    else:
+        response = _error(why, 401)
+    response.headers["WWW-Authenticate"] = challenge
+    return response
+
+
 def build_app(monitor: Monitor, auth: Auth) -> Starlette:
     """The Starlette application of the routes (module docstring)."""
     from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
     from starlette.applications import Starlette
     from starlette.background import BackgroundTask
     from starlette.concurrency import run_in_threadpool
-    from starlette.responses import FileResponse, HTMLResponse, RedirectResponse, Response
+    from starlette.responses import FileResponse, HTMLResponse, Response
     from starlette.routing import Mount, Route
     from starlette.schemas import SchemaGenerator
     from starlette.staticfiles import StaticFiles
@@ -141,9 +208,10 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         {"openapi": "3.0.0", "info": {"title": "thermodepth monitor", "version": __version__}}
     )
 
-    def who(request: Request) -> Identity | Response:
-        found = auth.identity(request.headers, request.cookies)
-        return found if found is not None else _error("a token is needed", 401)
+    def who(request: Request) -> Identity:
+        """The caller, as :class:`Guard` found it (every route but PUBLIC has one)."""
+        identity: Identity = request.state.identity
+        return identity
 
     template = (WEB / "page.html").read_text(encoding="utf-8")
 
@@ -151,8 +219,6 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         html = template.replace("{{page}}", name).replace("{{title}}", title)
 
         async def serve(request: Request) -> Response:
-            if auth.identity(request.headers, request.cookies) is None:
-                return RedirectResponse(f"/login?next={request.url.path}", 303)
             return HTMLResponse(html)
 
         return serve
@@ -188,8 +254,11 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
           200: {description: every rig has fresh data}
           503: {description: the rigs without fresh data}
         """
-        stale = monitor.stale_rigs()
-        return _json({"status": "stale", "rigs": stale}, 503) if stale else _json({"status": "ok"})
+        stale, down = monitor.stale_rigs(), monitor.unhealthy_workers()
+        if stale or down:
+            return _json({"status": "stale" if stale else "unwell", "rigs": stale,
+                          "workers": down}, 503)  # fmt: skip
+        return _json({"status": "ok"})
 
     async def status(request: Request) -> Response:
         """
@@ -199,8 +268,7 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
             temp_range_c; storage, mqtt, event_counts, latency_s"}
           401: {description: a token is needed}
         """
-        you = who(request)
-        return you if not isinstance(you, Identity) else _json(monitor.status())
+        return _json(monitor.status())
 
     async def session(request: Request) -> Response:
         """
@@ -209,8 +277,6 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
             CSRF token your POSTs carry as X-CSRF-Token"}
         """
         you = who(request)
-        if not isinstance(you, Identity):
-            return you
         return _json({"auth": you.kind, "name": you.name, "csrf": you.csrf})
 
     async def events(request: Request) -> Response:
@@ -228,9 +294,6 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
             gives for it (evidence: snapshot.png, clip.zip, cloud.ply)"}
           400: {description: a bad parameter}
         """
-        you = who(request)
-        if not isinstance(you, Identity):
-            return you
         q = request.query_params
         try:
             limit = min(int(q.get("limit", "100")), 1000)
@@ -248,9 +311,6 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
           200: {description: the event}
           404: {description: no such event}
         """
-        you = who(request)
-        if not isinstance(you, Identity):
-            return you
         found = monitor.event(request.path_params["id"])
         if found is None:
             return _error("no such event", 404)
@@ -264,9 +324,6 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
           404: {description: no such event, or its evidence is not kept}
           503: {description: the clip is still being recorded (Retry-After says when to ask)}
         """
-        you = who(request)
-        if not isinstance(you, Identity):
-            return you
         what = request.path_params["what"]
         if what not in EVIDENCE:
             return _error(f"expected one of {', '.join(EVIDENCE)}", 404)
@@ -294,9 +351,6 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
             (thermal.png); X-Capture-Time: its frame's capture time (Unix s), when known"}
           404: {description: no such rig, or no frame yet}
         """
-        you = who(request)
-        if not isinstance(you, Identity):
-            return you
         what = request.path_params["what"]
         if what not in PICTURES:
             return _error(f"expected one of {', '.join(PICTURES)}", 404)
@@ -320,9 +374,6 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
             hottest_c, rois (each ROI's max, C)"}
           404: {description: no such rig}
         """
-        you = who(request)
-        if not isinstance(you, Identity):
-            return you
         found = monitor.trend(request.path_params["rig"])
         return _json(found) if found is not None else _error("no such rig", 404)
 
@@ -342,8 +393,6 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
           409: {description: not raised}
         """
         you = who(request)
-        if not isinstance(you, Identity):
-            return you
         forged = auth.forged(you, request.headers)
         if forged is not None:
             return _error(forged, 403)
@@ -365,10 +414,34 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         except AckRefusedError as exc:
             return _error(exc.message, exc.status)
 
+    async def retire(request: Request) -> Response:
+        """
+        requestBody:
+          content:
+            application/json:
+              schema: {type: object, required: [name], properties: {name: {type: string}}}
+        responses:
+          200: {description: "the rigs retired: {retired: [...]}"}
+          400: {description: a malformed body}
+          403: {description: a forged request}
+          404: {description: no such rig or monitor}
+          409: {description: it still runs, or this is not a central dashboard}
+        """
+        forged = auth.forged(who(request), request.headers)
+        if forged is not None:
+            return _error(forged, 403)
+        try:
+            body = await request.json()
+        except ValueError:
+            body = None
+        if not isinstance(body, dict) or not isinstance(body.get("name"), str):
+            return _error('expected {"name": RIG or MONITOR}', 400)
+        try:
+            return _json({"retired": await run_in_threadpool(monitor.retire, body["name"])})
+        except AckRefusedError as exc:
+            return _error(exc.message, exc.status)
+
     async def metrics(request: Request) -> Response:
-        you = who(request)
-        if not isinstance(you, Identity):
-            return you
         return Response(generate_latest(registry), media_type=CONTENT_TYPE_LATEST)
 
     async def openapi(request: Request) -> Response:
@@ -389,42 +462,37 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         Route("/api/rigs/{rig:path}/trend", trend),  # a central dashboard's rigs: EDGE/RIG
         Route("/api/rigs/{rig:path}/{what}", picture),
         Route("/api/ack", ack, methods=["POST"]),
+        Route("/api/retire", retire, methods=["POST"]),
         Route("/api/openapi.json", openapi, include_in_schema=False),
         Route("/metrics", metrics),
         Mount("/static", StaticFiles(directory=str(WEB)), name="static"),
     ]
-    return Starlette(routes=routes)
+    from starlette.middleware import Middleware
+
+    return Starlette(routes=routes, middleware=[Middleware(Guard, auth=auth)])
 
 
 class HttpServer:
-    """The application served by uvicorn on a thread of its own (over TLS when
-    ``http.tls_cert`` and ``tls_key`` are given); ``start`` binds the address first, so that
-    one taken is one InputError line."""
+    """The application served by uvicorn on a supervised worker of its own (restarted when
+    it fails; over TLS when ``http.tls_cert`` and ``tls_key`` are given); ``start`` binds the
+    address first, so that one taken is one InputError line."""
 
     def __init__(self, monitor: Monitor, config: HttpConfig) -> None:
         try:
-            import uvicorn
+            import uvicorn  # noqa: F401
 
             token = None if config.token_file is None else read_token(config.token_file)
             self.tls = config.tls_cert is not None
-            app = build_app(monitor, Auth.from_env(token, secure=self.tls))
+            self.app = build_app(monitor, Auth.from_env(token, secure=self.tls))
         except ImportError:
             raise InputError(INSTALL) from None
+        self.config = config
         self.host, self.port = config.address()
-        cert, key = config.tls_cert, config.tls_key
-        self.server = uvicorn.Server(
-            uvicorn.Config(
-                app,
-                log_level="warning",
-                access_log=False,
-                lifespan="off",
-                ssl_certfile=None if cert is None else str(cert),
-                ssl_keyfile=None if key is None else str(key),
-            )
-        )
-        self._thread: threading.Thread | None = None
+        self.server: Any = None
+        self._sock: socket.socket | None = None
+        self.worker = Worker("http", self._serve, None, HTTP_LIMIT_S, logger("http"))
 
-    def start(self) -> None:
+    def _bind(self) -> socket.socket:
         family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -437,17 +505,38 @@ class HttpServer:
             ) from None
         sock.listen(128)  # so that a client early on waits in the queue, not refused
         self.port = sock.getsockname()[1]  # the one given, or the one found for 0
-        self._thread = threading.Thread(
-            target=self.server.run, kwargs={"sockets": [sock]}, name="http", daemon=True
+        return sock
+
+    def start(self) -> None:
+        self._sock = self._bind()
+        self.worker.start()
+
+    def _serve(self, worker: Worker) -> None:
+        import uvicorn
+
+        if self._sock is None or self._sock.fileno() == -1:  # closed by a server that failed
+            self._sock = self._bind()
+        cert, key = self.config.tls_cert, self.config.tls_key
+        self.server = uvicorn.Server(
+            uvicorn.Config(
+                self.app,
+                log_level="warning",
+                access_log=False,
+                lifespan="off",
+                ssl_certfile=None if cert is None else str(cert),
+                ssl_keyfile=None if key is None else str(key),
+            )
         )
-        self._thread.start()
+        if not worker.stopping.is_set():
+            self.server.run(sockets=[self._sock])
 
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"{'https' if self.tls else 'http'}://{host}:{self.port}"
 
-    def stop(self) -> None:
-        self.server.should_exit = True
-        if self._thread is not None:
-            self._thread.join(5.0)
+    def stop(self, reason: str = "stopped") -> None:
+        self.worker.stopping.set()
+        if self.server is not None:
+            self.server.should_exit = True
+        self.worker.stop()

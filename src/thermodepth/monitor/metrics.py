@@ -1,6 +1,7 @@
 """The monitor's figures in Prometheus' text format (``GET /metrics``): per rig its freshness,
 rate, counters, sensor temperature, pipeline time and active alarms; events by state; the
-event store's size, free disk and alarm latencies. Read when scraped, from
+event store's size, free disk and alarm latencies; each worker of the monitor's state and
+restarts. Read when scraped, from
 :meth:`~.service.Monitor.status`."""
 
 from __future__ import annotations
@@ -94,5 +95,16 @@ def collector(current: Callable[[], dict[str, Any]]) -> Any:
                     value = figures[key]
                     latency.add_metric([to, q], float("nan") if value is None else value)
             yield latency
+            up = GaugeMetricFamily(
+                "thermodepth_worker_up", "1 while the worker is well", labels=["worker"]
+            )
+            restarts = CounterMetricFamily(
+                "thermodepth_worker_restarts", "restarts after a failure", labels=["worker"]
+            )
+            for w in status.get("workers", []):
+                up.add_metric([w["name"]], int(w["healthy"] and w["state"] == "running"))
+                restarts.add_metric([w["name"]], w["restarts"])
+            yield up
+            yield restarts
 
     return Collector()

@@ -10,17 +10,20 @@ measuring and alarming go on.
 The monitor's clock (:data:`TICK_S`) watches each rig: no new frame for its ``stall_s``
 (longer while its shutter closes), or the same frame again and again, is a stall (the rig's
 source is closed, recovered and reopened) and a ``sensor_fault``; it also sends systemd its
-watchdog, publishes the rigs' status, and sweeps the storage every :data:`SWEEP_S`.
+watchdog while every rig and every worker is well, and ticks the outputs. The storage is
+swept every :data:`SWEEP_S`. The clock, the sweep, the evidence painter, the HTTP server and
+the outputs' loops are supervised workers (:mod:`.workers`); the outputs (MQTT, OPC UA, ...)
+are driven through one interface (:mod:`.outputs`).
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import sqlite3
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -31,21 +34,24 @@ from ..io.measurements import jsonable
 from ..pipeline import FusedFrame
 from .config import MONITOR, MonitorConfig, RigConfig
 from .evidence import Evidence
-from .failsafe import SENSOR_FAULT, STORAGE_FAULT, Fault
-from .homeassistant import RigEntities
+from .failsafe import STORAGE_FAULT, Fault
 from .live import Picture
-from .opcua import OpcUaServer
-from .publish import MonitorPublisher
+from .logs import apply_levels, logger
+from .outputs import OUTPUT_BUILDERS, Output, OutputContext, RigEntities, build_outputs
 from .rig import RigSink, quantiles
 from .storage import CLIPS, Retention, free_bytes
 from .store import EventStore, counts_by_rig
 from .supervisor import AckRefusedError, ClipNotReadyError, RigRunner
 from .systemd import notify, watchdog_interval_s
+from .workers import Worker, Workers
 
 TICK_S = 0.25
 SWEEP_S = 30.0
-STATUS_EVERY_S = 10.0
 STORE_NAME = "events.sqlite"
+CLOCK_LIMIT_S = 5.0
+SWEEP_LIMIT_S = 120.0
+OUTPUT_ERROR_EVERY_S = 60.0
+"""An output whose tick keeps failing is logged (with its traceback) at most this often."""
 
 
 def utc_of(time_s: float) -> str:
@@ -58,11 +64,14 @@ EVIDENCE_FILES = {"snapshot.png": "overlay.png", "clip.zip": "clip.zarr", "cloud
 
 
 class Monitor:
-    """The monitor of ``config`` (module docstring); ``log``: one line each of what happens.
-    ``start`` and ``stop`` it; ``reload`` a new config while it runs."""
+    """The monitor of ``config`` (module docstring), logging to ``thermodepth.monitor`` and
+    its parts (:mod:`.logs`). ``start`` and ``stop`` it; ``reload`` a new config while it
+    runs."""
 
-    def __init__(self, config: MonitorConfig, log: Callable[[str], None] = print) -> None:
-        self.config, self.log = config, log
+    def __init__(self, config: MonitorConfig) -> None:
+        self.config = config
+        self.log = logger()
+        apply_levels(config.log.level, config.log.rigs)
         self.started_mono = time.monotonic()
         self.started_utc = utc_of(time.time())
         self.store = EventStore(config.storage.path / STORE_NAME)
@@ -76,6 +85,7 @@ class Monitor:
         self._lock = threading.RLock()
         self._storage_fault = Fault(STORAGE_FAULT, "disk")
         self._storage_lines: list[str] = []
+        self._output_errors: dict[str, float] = {}
         self._build(config)
 
     # -- parts ---------------------------------------------------------------------------------
@@ -83,36 +93,31 @@ class Monitor:
     def _build(self, config: MonitorConfig) -> None:
         """The parts a config makes (not started)."""
         self.config = config
-        self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
         self.http: Any = None
         s = config.storage
         self.evidence = Evidence(
-            s.path / CLIPS, s.pre_s, s.post_s, s.clip_max_s, self.storage_problem, self.log
+            s.path / CLIPS, s.pre_s, s.post_s, s.clip_max_s, self.storage_problem
         )
         self.runners = {rig.name: self._runner(rig) for rig in config.rigs}
         self.retention = Retention(s, self._busy, self.store.clip_deleted)
-        self.publisher = self._publisher()
-        self.opcua = self._opcua()
+        self.outputs: list[Output] = build_outputs(config, self._context())
+        self.workers = Workers()
+        self.workers.add(Worker("clock", self._clock, TICK_S, CLOCK_LIMIT_S, self.log))
+        self.workers.add(Worker("storage", self._sweeper, SWEEP_S, SWEEP_LIMIT_S, self.log))
+        self.workers.add(self.evidence.painter)
+        for output in self.outputs:
+            for worker in output.workers():
+                self.workers.add(worker)
 
-    def _opcua(self) -> OpcUaServer | None:
-        """The OPC UA server for the config and rigs now (None: none asked for)."""
-        if self.config.opcua is None:
-            return None
-        return OpcUaServer(self.config.opcua, self.entities(), self.config.storage.path, self.log)
-
-    def _publisher(self) -> MonitorPublisher | None:
-        """The broker's part for the config and rigs now (None: no broker)."""
-        if self.config.mqtt is None:
-            return None
-        return MonitorPublisher(
-            self.config.mqtt,
-            self.store,
+    def _context(self) -> OutputContext:
+        return OutputContext(
+            self.config,
             self.entities(),
+            self.store,
             self.acknowledge,
-            self._published,
             self.picture,
-            self.log,
+            self._delivered,
+            lambda: self.status()["rigs"],
         )
 
     def entities(self) -> list[RigEntities]:
@@ -127,42 +132,9 @@ class Monitor:
             for r in self.runners.values()
         ]
 
-    def _start_outputs(self) -> None:
-        started: list[Any] = []
-        try:
-            self._start_publisher()
-            started.append(self.publisher)
-            if self.config.http.listen is not None:
-                from .http import HttpServer
-
-                self.http = HttpServer(self, self.config.http)
-                self.http.start()
-                started.append(self.http)
-                self.log(f"monitor: HTTP on {self.http.url}")
-            if self.opcua is not None:
-                self.opcua.start()
-                started.append(self.opcua)
-                self.log(f"monitor: OPC UA on {self.config.opcua.endpoint}")  # type: ignore[union-attr]
-        except BaseException:
-            for part in reversed(started):
-                if part is not None:
-                    part.stop()
-            self.publisher, self.http, self.opcua = None, None, None
-            raise
-
-    def _start_publisher(self) -> None:
-        """Connect to the broker and tell it every rig's alarm states."""
-        if self.publisher is None:
-            return
-        self.publisher.start()
-        for runner in self.runners.values():
-            self._alarm_states(runner)
-
-    def _alarm_states(self, runner: RigRunner) -> None:
-        if self.publisher is not None:
-            raised = {a["rule"] for a in runner.raised()}
-            states = {a.name: "ON" if a.name in raised else "OFF" for a in runner.settings.alarms}
-            self.publisher.alarm_states(runner.name, states)
+    def output(self, name: str) -> Output | None:
+        """The output of that name (``mqtt``, ``opcua``, ...), None when not configured."""
+        return next((o for o in self.outputs if o.name == name), None)
 
     def _runner(self, rig: RigConfig, config: MonitorConfig | None = None) -> RigRunner:
         c = config or self.config
@@ -173,17 +145,13 @@ class Monitor:
             self.evidence,
             self.emit,
             self.measured,
-            self.log,
             self.storage_problem,
         )
 
     def measured(self, sink: RigSink, fused: FusedFrame) -> None:
-        """A rig's fused frame: its summary to the broker, its readings to OPC UA (each at
-        its rate)."""
-        if self.publisher is not None:
-            self.publisher.measurement(sink.name, fused)
-        if self.opcua is not None:
-            self.opcua.measured(sink.name, fused)
+        """A rig's fused frame: to every output (each keeps its own rate)."""
+        for output in self.outputs:
+            output.measured(sink.name, fused)
 
     def _busy(self) -> set[Any]:
         busy = self.evidence.active_folders()
@@ -192,85 +160,132 @@ class Monitor:
                 busy |= r.sink.continuous.active
         return busy
 
+    def _raised(self) -> dict[str, set[str]]:
+        return {name: {a["rule"] for a in r.raised()} for name, r in self.runners.items()}
+
     def start(self) -> None:
-        """Start every part: the broker, the HTTP and OPC UA servers first (each may refuse
-        with one InputError line: what had started is stopped, nothing else starts), then the
-        rigs and the clock."""
-        self._start_outputs()
+        """Start every part: the outputs and the HTTP server first, each binding or connecting
+        without a word to anyone (each may refuse with one InputError line: what had started
+        is stopped, nothing else starts, nothing was published); then the outputs announce
+        the monitor, and the rigs and the workers start."""
+        started: list[Any] = []
+        try:
+            for output in self.outputs:
+                output.start()
+                started.append(output)
+                self.log.info("monitor: %s", output.describe())
+            if self.config.http.listen is not None:
+                from .http import HttpServer
+
+                self.http = HttpServer(self, self.config.http)
+                self.http.start()
+                started.append(self.http)
+                self.workers.add(self.http.worker)
+                self.log.info("monitor: HTTP on %s", self.http.url)
+        except BaseException:
+            for part in reversed(started):
+                for worker in getattr(part, "workers", lambda: [])():
+                    worker.stop()
+                part.stop("not started")
+            self.outputs, self.http = [], None
+            raise
+        raised = self._raised()
+        for output in self.outputs:
+            output.announce(raised)
         for runner in self.runners.values():
             runner.start()
-        for target, name in ((self._clock, "monitor clock"), (self._sweeper, "storage")):
-            thread = threading.Thread(target=target, name=name, daemon=True)
-            thread.start()
-            self._threads.append(thread)
-        self.log(
-            f"monitor: watching {len(self.runners)} rigs ({', '.join(self.runners)}), "
-            f"storage {self.config.storage.path}"
+        self.workers.start()
+        self.log.info(
+            "monitor: watching %d rigs (%s), storage %s",
+            len(self.runners),
+            ", ".join(self.runners),
+            self.config.storage.path,
         )
 
     def stop(self, reason: str = "stopped") -> None:
-        """Stop the rigs, finish the clips and recordings, say so to the broker, close."""
+        """Stop the rigs, finish the clips and recordings, say so to the outputs, close."""
         self._stop_parts(reason)
         self._flush_backlog()
         if self.backlog:  # a disk still full: the log keeps them
-            self.log(
-                f"storage: {len(self.backlog)} events could not be written to "
-                f"{self.store.path}; here they are, one JSON line each:"
+            self.log.error(
+                "storage: %d events could not be written to %s; here they are, one JSON line each:",
+                len(self.backlog),
+                self.store.path,
             )
             for event in self.backlog:
-                self.log(json.dumps(jsonable(event)))
+                self.log.error("%s", json.dumps(jsonable(event)))
         self.store.close()
 
     def _stop_parts(self, reason: str) -> None:
         """Everything but the event store stopped (see :meth:`stop`)."""
-        self._stop.set()
         for runner in self.runners.values():
             runner.stop()
-        for thread in self._threads:
-            thread.join(5.0)
         self.evidence.close()
         for runner in self.runners.values():
             if runner.sink.continuous is not None:
                 runner.sink.continuous.join()
-        if self.publisher is not None:
-            self.publisher.stop(reason)
+        self.workers.stop()
+        for output in self.outputs:
+            output.stop(reason)
         if self.http is not None:
             self.http.stop()
-        if self.opcua is not None:
-            self.opcua.stop()
 
     def reload(self, config: MonitorConfig) -> None:
         """Apply a new config while running: a rig changed (its entry or its settings
-        file's content), added or removed is restarted, added or stopped on its own; any
-        other change (storage, http, mqtt, failsafe) restarts every part. The event store
-        stays open."""
+        file's content), added or removed is restarted, added or stopped on its own, and an
+        output whose rigs changed is started again; any other change (storage, http, an
+        output's section, failsafe) restarts every part. A rule that did not change keeps
+        its state (raised, acknowledged) across either. The log's levels change at once. The
+        event store stays open."""
+        apply_levels(config.log.level, config.log.rigs)
         old = self.config
-        same_rest = old.model_copy(update={"rigs": []}) == config.model_copy(update={"rigs": []})
-        if not same_rest:
-            self.log("monitor: reloading every part (storage, http, mqtt or failsafe changed)")
+
+        def rest(c: MonitorConfig) -> MonitorConfig:
+            return c.model_copy(update={"rigs": [], "log": None})
+
+        if rest(old) != rest(config):
+            self.log.info(
+                "monitor: reloading every part (storage, http, outputs or failsafe changed)"
+            )
             self._restart(config)
             return
-        keep = {r.name: r for r in config.rigs if self._unchanged(r)}
+        keep = {r.name for r in config.rigs if self._unchanged(r)}
+        gone: dict[str, RigRunner] = {}
         for name, runner in list(self.runners.items()):
             if name not in keep:
                 runner.stop()
-                del self.runners[name]
-                self.log(f"{name}: stopped (reload)")
+                gone[name] = self.runners.pop(name)
+                self.log.info("%s: stopped (reload)", name)
+        self.config = config
         for rig in config.rigs:
             if rig.name not in self.runners:
                 runner = self._runner(rig, config)
+                kept = runner.carry_over(gone[rig.name]) if rig.name in gone else []
                 self.runners[rig.name] = runner
                 runner.start()
-                self.log(f"{rig.name}: started (reload)")
-        self.config = config
-        if self.publisher is not None and self.publisher.entities != self.entities():
-            self.publisher.stop("reloading")
-            self.publisher = self._publisher()
-            self._start_publisher()
-        if self.opcua is not None and self.opcua.rigs != self.entities():
-            self.opcua.stop()
-            self.opcua = self._opcua()
-            self.opcua.start()  # type: ignore[union-attr]
+                self.log.info(
+                    "%s: started (reload)%s", rig.name,
+                    f"; rules kept as they were: {', '.join(kept)}" if kept else "",
+                )  # fmt: skip
+        self.runners = {r.name: self.runners[r.name] for r in config.rigs}  # config order
+        for i, output in enumerate(self.outputs):
+            if not output.fits(self.entities()):
+                self.outputs[i] = self._rebuilt(output)
+
+    def _rebuilt(self, output: Output) -> Output:
+        """An output built again for the rigs now, started and announced."""
+        for worker in output.workers():
+            worker.stop()
+            self.workers.all.pop(worker.name, None)
+        output.stop("reloading")
+        new = OUTPUT_BUILDERS[output.name].build(self.config, self._context())
+        assert new is not None
+        new.start()
+        new.announce(self._raised())
+        for worker in new.workers():
+            self.workers.add(worker)
+            worker.start()
+        return new
 
     def _unchanged(self, rig: Any) -> bool:
         runner = self.runners.get(rig.name)
@@ -285,15 +300,17 @@ class Monitor:
         return text == runner.settings_text
 
     def _restart(self, config: MonitorConfig) -> None:
-        """Every part stopped and started again from ``config``; if it cannot start (a port
-        taken, a broker away), the old config is started again and the error raised."""
-        old = self.config
+        """Every part stopped and started again from ``config`` (unchanged rules keeping
+        their states); if it cannot start (a port taken, a broker away), the old config is
+        started again and the error raised."""
+        old, before = self.config, self.runners
         self._stop_parts("reloading")
         if config.storage.path != old.storage.path:
             self.store.close()
             self.store = EventStore(config.storage.path / STORE_NAME)
         try:
             self._build(config)
+            self._carry_over(before)
             self.start()
         except BaseException:
             self._stop_parts("reloading")
@@ -301,15 +318,22 @@ class Monitor:
                 self.store.close()
                 self.store = EventStore(old.storage.path / STORE_NAME)
             self._build(old)
+            self._carry_over(before)
             self.start()
             raise
+
+    def _carry_over(self, before: dict[str, RigRunner]) -> None:
+        for name, runner in self.runners.items():
+            if name in before:
+                runner.carry_over(before[name])
 
     # -- events --------------------------------------------------------------------------------
 
     def emit(self, sink: RigSink, events: list[dict[str, Any]], fused: FusedFrame | None) -> None:
-        """A rig's events (module docstring): clip, row, outbox, line; then the picture of a
-        new clip (the slow part, after the alarm is out)."""
+        """A rig's events (module docstring): clip, row, outbox, line; then to every output,
+        and the picture of a new clip (the slow part, after the alarm is out)."""
         runner = self.runners.get(sink.name)
+        told = []
         for event in events:
             event = {**event, "rig": sink.name}
             if runner is not None and runner.config.location:
@@ -327,33 +351,31 @@ class Monitor:
                     event["clip"] = clip.id
                     drawn = clip if new else None
             self.record(event, captured, runner is None or runner.wall_clock)
+            told.append(event)
             if drawn is not None and fused is not None:
                 fixed = runner.settings.viewer.fixed_range_c if runner else None
                 self.evidence.draw(fused, drawn, event, fixed)
         if runner is not None:
-            self._alarm_states(runner)
-            if self.opcua is not None:
-                raised = {a["rule"] for a in runner.raised()}
-                for event in events:
-                    rule = event["rule"]
-                    self.opcua.event({**event, "rig": sink.name},
-                                     None if rule == SENSOR_FAULT else rule in raised)  # fmt: skip
+            raised = {a["rule"] for a in runner.raised()}
+            for output in self.outputs:
+                output.events(sink.name, told, raised)
 
     def record(
         self, event: dict[str, Any], captured_s: float | None = None, unix_time: bool = True
     ) -> None:
-        """Write, publish and tell one event (with ``rig``); ``captured_s``: its frame's
-        capture time (Unix s), for the latency figures; ``unix_time``: its ``time_s`` is a
-        Unix time (a rig on a live clock; else it is stamped with now)."""
+        """Write, send and log one event (with ``rig``); ``captured_s``: its frame's capture
+        time (Unix s), for the latency figures; ``unix_time``: its ``time_s`` is a Unix time
+        (a rig on a live clock; else it is stamped with now)."""
         time_s = event.get("time_s")
         event["time_utc"] = utc_of(time_s if unix_time and time_s else time.time())
         event["state"] = event["event"]  # the lifecycle's word for it, as the store's column
         why = None
+        outbox = [o for o in self.outputs if o.outbox]
         with self._lock:
             self.event_counts[(event["rig"], event["event"])] += 1
             self._flush_backlog()
             try:
-                event["id"] = self.store.add(event, outbox=self.publisher is not None)
+                event["id"] = self.store.add(event, outbox=bool(outbox))
             except sqlite3.Error as exc:
                 self.backlog.append(event)
                 why = (
@@ -366,12 +388,14 @@ class Monitor:
                     self._captured[event["id"]] = captured_s
         if why is not None:
             self.storage_problem(why)
-        if self.publisher is not None:
+        for output in outbox:
             if why is None:
-                self.publisher.wake()
+                output.wake()
             else:
-                self.publisher.publish_direct(event)
-        self.log(f"{event['rig']}: {event_line(event)}")
+                output.send_now(event)
+        rig_log = self.log if event["rig"] == MONITOR else logger(f"rig.{event['rig']}")
+        level = logging.WARNING if event["event"] in RAISED else logging.INFO
+        rig_log.log(level, "%s: %s", event["rig"], event_line(event))
 
     def _flush_backlog(self) -> None:
         """Write the events the store could not take, in order, while it takes them."""
@@ -383,7 +407,7 @@ class Monitor:
                     return
                 self.backlog.pop(0)
 
-    def _published(self, event: dict[str, Any]) -> None:
+    def _delivered(self, event: dict[str, Any]) -> None:
         captured = self._captured.pop(event.get("id", -1), None)
         if captured is not None:
             self.latency_s["broker"].append(time.time() - captured)
@@ -398,47 +422,49 @@ class Monitor:
         self.emit(runner.sink, events, None)
         return events
 
+    def retire(self, name: str) -> list[str]:
+        """Rigs leave a monitor by leaving its config (a reload); only a central dashboard
+        retires them (AckRefusedError 409)."""
+        raise AckRefusedError(
+            409, "a monitor's rigs leave by its config (then reload it); the central "
+            "dashboard retires a monitor that is gone"
+        )  # fmt: skip
+
     def storage_problem(self, line: str) -> None:
         """Something could not be kept: a ``storage_fault`` (raised once; cleared by a sweep
         with nothing new to tell and space enough)."""
-        self.log(f"storage: {line}")
+        self.log.error("storage: %s", line)
         with self._lock:
             self._storage_lines.append(line)
             event = self._storage_fault.update(time.time(), True, line)
         if event is not None:
             self.record({**event, "rig": MONITOR})
 
-    # -- the clock -----------------------------------------------------------------------------
+    # -- the workers ---------------------------------------------------------------------------
 
-    def _clock(self) -> None:
+    def _clock(self, worker: Worker) -> None:
         watchdog_s = watchdog_interval_s()
         last = time.monotonic()
-        last_dog = last_status = last_opcua = float("-inf")
-        last_told: dict[str, tuple[str, str]] = {}  # each rig's state and health, as published
-        while not self._stop.wait(TICK_S):
+        last_dog = float("-inf")
+        while not worker.stopping.wait(TICK_S):
+            worker.beat()
             now = time.monotonic()
             dt, last = now - last, now
             for runner in list(self.runners.values()):
                 self._watch(runner, now, dt)
-            alive = all(r.alive for r in self.runners.values())
-            if watchdog_s is not None and now - last_dog >= watchdog_s and alive:
+            well = all(r.alive for r in self.runners.values()) and not self.workers.unhealthy()
+            if watchdog_s is not None and now - last_dog >= watchdog_s and well:
                 notify("WATCHDOG=1")
                 last_dog = now
-            if self.opcua is not None:
-                self.opcua.flush()
-                if now - last_opcua >= 1.0:
-                    last_opcua = now
-                    for r in self.status()["rigs"]:
-                        self.opcua.status(r)
-            if self.publisher is not None:
-                stale = set(self.stale_rigs())
-                told = {
-                    r.name: (r.status.state, self._health(r, stale)) for r in self.runners.values()
-                }
-                if now - last_status >= STATUS_EVERY_S or told != last_told:
-                    last_status, last_told = now, told
-                    for r in self.status()["rigs"]:
-                        self.publisher.rig_status(r["name"], r)
+            for output in list(self.outputs):
+                try:
+                    output.tick(now)
+                except Exception:  # one output's trouble must not stop the clock's watch
+                    if now - self._output_errors.get(output.name, -OUTPUT_ERROR_EVERY_S) >= (
+                        OUTPUT_ERROR_EVERY_S
+                    ):
+                        self._output_errors[output.name] = now
+                        self.log.error("%s: its tick failed", output.name, exc_info=True)
 
     def _watch(self, runner: RigRunner, now_mono: float, dt: float) -> None:
         s = runner.status
@@ -459,15 +485,17 @@ class Monitor:
         elif s.frozen_since_mono is not None and now_mono - s.frozen_since_mono >= limit:
             runner.abort_stalled(f"the same frame for {now_mono - s.frozen_since_mono:.1f} s")
 
-    def _sweeper(self) -> None:
+    def _sweeper(self, worker: Worker) -> None:
         while True:
+            worker.beat()
             self.sweep()
-            if self._stop.wait(SWEEP_S):
+            if worker.stopping.wait(SWEEP_S):
                 return
 
     def sweep(self) -> None:
         """Apply the storage rule, write what the store could not take; clear the storage
-        fault when nothing new went wrong and space is enough."""
+        fault when nothing new went wrong and space is enough. An error of the event store
+        ends the sweep (its worker is restarted; what it had not done is done next time)."""
         try:
             low = self.retention.sweep()
         except OSError as exc:
@@ -495,6 +523,10 @@ class Monitor:
             and (r.status.state != "running" or r.status.age_s(now) >= r.config.stall_s)
         ]
 
+    def unhealthy_workers(self) -> list[str]:
+        """The monitor's workers down for longer than their limit (none: healthy)."""
+        return self.workers.unhealthy()
+
     @staticmethod
     def _health(runner: RigRunner, stale: set[str]) -> str:
         """``stale`` (no fresh data), ``fault`` (a sensor fault raised) or ``ok``."""
@@ -513,11 +545,14 @@ class Monitor:
             d["temp_range_c"] = r.live.range_c
             rigs.append(d)
         path = self.config.storage.path
+        mqtt = self.output("mqtt")
         return {
             "version": __version__,
             "started_utc": self.started_utc,
             "uptime_s": round(now - self.started_mono, 1),
             "rigs": rigs,
+            "workers": self.workers.status(now),
+            "outputs": {o.name: o.status() for o in self.outputs},
             "storage": {
                 "path": str(path),
                 "free_bytes": free_bytes(path),
@@ -527,14 +562,7 @@ class Monitor:
                 "deleted": dict(self.retention.deleted),
                 "fault": self._storage_fault.raised,
             },
-            "mqtt": None
-            if self.publisher is None
-            else {
-                "broker": self.publisher.target.where,
-                "prefix": self.publisher.target.prefix,
-                "sent": self.publisher.sent,
-                "unacknowledged": self.publisher.connection.pending,
-            },
+            "mqtt": None if mqtt is None else mqtt.status(),
             "event_counts": counts_by_rig(self.event_counts),
             "latency_s": {k: quantiles(v) for k, v in self.latency_s.items()},
         }

@@ -8,12 +8,13 @@ slows another: they share nothing but the monitor's outputs.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
-import traceback
 from collections.abc import Callable
 from typing import Any
 
+from ..alarms import RuleState
 from ..calibration import Calibration
 from ..errors import ThermodepthError
 from ..pipeline import FusedFrame, Pipeline, Settings
@@ -23,10 +24,11 @@ from .config import FailsafeConfig, RigConfig, StorageConfig
 from .evidence import Evidence, PreTrigger
 from .failsafe import SENSOR_FAULT, SensorWatch
 from .live import LiveView
+from .logs import rig_logger
 from .rig import PacedSource, RigSink, RigStatus
 from .storage import CONTINUOUS, ContinuousRecorder
+from .workers import BACKOFF_S
 
-BACKOFF_S = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)
 MB = 1e6
 
 
@@ -55,7 +57,8 @@ class ClipNotReadyError(Exception):
 class RigRunner:
     """One rig (module docstring). ``emit(sink, events, fused)``: where its events go;
     ``measured(sink, fused)``: told of each fused frame; ``log``: one line each of what
-    happens to it; ``on_storage_fault``: what its continuous recording could not keep."""
+    ``on_storage_fault``: what its continuous recording could not keep. It logs to its own
+    logger (``thermodepth.monitor.rig.NAME``)."""
 
     def __init__(
         self,
@@ -65,10 +68,9 @@ class RigRunner:
         evidence: Evidence,
         emit: Callable[[RigSink, list[dict[str, Any]], FusedFrame | None], None],
         measured: Callable[[RigSink, FusedFrame], None],
-        log: Callable[[str], None],
         on_storage_fault: Callable[[str], None],
     ) -> None:
-        self.config, self.log = config, log
+        self.config, self.log = config, rig_logger(config.name)
         self.settings = Settings.load(config.settings) if config.settings else Settings()
         self.settings_text = (
             config.settings.read_text(encoding="utf-8") if config.settings else None
@@ -97,6 +99,7 @@ class RigRunner:
             self.live,
         )  # fmt: skip
         self.pipeline: Pipeline | None = None
+        self._carried: dict[str, RuleState] = {}  # rules' states from before a reload
         self.source: PacedSource | None = None
         self._stop = threading.Event()
         self._stalled: str | None = None
@@ -106,8 +109,25 @@ class RigRunner:
     def name(self) -> str:
         return self.config.name
 
-    def say(self, line: str) -> None:
-        self.log(f"{self.name}: {line}")
+    def carry_over(self, old: RigRunner) -> list[str]:
+        """Before it starts, in place of ``old`` (the same rig, before a reload): each alarm
+        rule unchanged keeps its state (raised, acknowledged: not raised again), and with
+        the same source its sensor faults stay as they were. Returns the rules kept."""
+        if old.pipeline is not None:
+            rules = {r.name: r for r in old.pipeline.alarms.rules}
+            self._carried = {
+                a.name: old.pipeline.alarms.states[a.name]
+                for a in self.settings.alarms
+                if rules.get(a.name) == a.rule()
+            }
+        if old.config.source == self.config.source and old.config.stall_s == self.config.stall_s:
+            self.watch = old.watch
+            self.sink.watch = old.watch
+        return sorted(self._carried)
+
+    def say(self, line: str, level: int = logging.INFO) -> None:
+        """A line of the rig's log, its name first."""
+        self.log.log(level, "%s: %s", self.name, line)
 
     def start(self) -> None:
         self.thread.start()
@@ -119,7 +139,7 @@ class RigRunner:
             self.calibration,
             max_skew_s=c.max_skew_s,
             thermal_latency_s=c.thermal_latency_s,
-            warn=self.say,
+            warn=lambda line: self.say(line, logging.WARNING),
             depth_mode=c.depth_mode,
         )
         index_from = 0 if self.source is None else self.source.last_index + 1
@@ -130,9 +150,12 @@ class RigRunner:
             source.require_pairs()
             if self.pipeline is None:
                 self.pipeline = Pipeline(
-                    self.settings, inner.calibration or self.calibration, warn=self.say
+                    self.settings,
+                    inner.calibration or self.calibration,
+                    warn=lambda line: self.say(line, logging.WARNING),
                 )
                 self.watch.vox_range_c = self.pipeline.model.vox_range_c
+                self.pipeline.alarms.states.update(self._carried)
         except BaseException:
             source.close()
             raise
@@ -177,7 +200,7 @@ class RigRunner:
             return str(exc)
         except Exception as exc:  # a bug must not silence the rig: said, and reopened
             self.status.last_error = f"{type(exc).__name__}: {exc}"
-            self.log(f"{self.name}: unexpected error\n{traceback.format_exc().rstrip()}")
+            self.log.error("%s: unexpected error", self.name, exc_info=True)
             return self.status.last_error
         if result.error:
             return f"{result.stopped}: {result.error}"
@@ -189,7 +212,7 @@ class RigRunner:
         wait_s = BACKOFF_S[min(attempt, len(BACKOFF_S) - 1)]
         self.status.state = "reopening"
         self.status.last_error = why
-        self.say(f"{why}; reopening in {wait_s:g} s")
+        self.say(f"{why}; reopening in {wait_s:g} s", logging.WARNING)
         self._stop.wait(wait_s)
 
     def abort_stalled(self, why: str) -> None:

@@ -29,12 +29,13 @@ configs retained under its node when it connects.
 from __future__ import annotations
 
 import json
+import logging
 import re
-from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any
 
-from .. import __version__
-from ..sinks.mqtt import MqttConnection
+from ... import __version__
+from ...sinks.mqtt import MqttConnection
+from .base import RigEntities
 
 AVAILABLE = "{{ 'online' if value_json.state == 'running' else 'offline' }}"
 RIG_UP = "{{ 'online' if value_json.up == 1 else 'offline' }}"
@@ -45,15 +46,6 @@ TEMPERATURE = {"device_class": "temperature", "unit_of_measurement": "°C",
 def slug(text: str) -> str:
     """Letters, digits and ``_`` only, as Home Assistant's ids want them."""
     return re.sub(r"[^A-Za-z0-9_]+", "_", text).strip("_").lower()
-
-
-class RigEntities(NamedTuple):
-    """What a rig shows Home Assistant: its name, location, ROIs and alarm rules."""
-
-    name: str
-    location: str | None
-    rois: list[str]
-    rules: list[str]
 
 
 def configs(prefix: str, discovery: str, rigs: list[RigEntities]) -> dict[str, dict[str, Any]]:
@@ -125,7 +117,7 @@ def rig_configs(
 
 class Discovery:
     """Keeps Home Assistant's discovery configs on the broker (module docstring) through
-    ``connection``; ``log``: one line each of what it does."""
+    ``connection``; ``log``: where it says what it does."""
 
     def __init__(
         self,
@@ -133,7 +125,7 @@ class Discovery:
         prefix: str,
         discovery: str,
         rigs: list[RigEntities],
-        log: Callable[[str], None],
+        log: logging.Logger,
     ) -> None:
         self.connection, self.discovery, self.log = connection, discovery, log
         self.node = f"thermodepth_{slug(prefix)}"
@@ -155,11 +147,11 @@ class Discovery:
 
     def _birth(self, topic: str, payload: bytes) -> None:
         if payload.strip() == b"online":
-            self.log("Home Assistant is online: discovery configs published again")
+            self.log.info("Home Assistant is online: discovery configs published again")
             self.publish()
 
     def _seen(self, topic: str, payload: bytes) -> None:
         if payload and topic not in self.configs:
             self.removed.append(topic)
             self.connection.publish(topic, "", qos=1, retain=True)
-            self.log(f"Home Assistant: {topic} removed (no longer in the config)")
+            self.log.info("Home Assistant: %s removed (no longer in the config)", topic)

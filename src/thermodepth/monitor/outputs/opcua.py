@@ -44,13 +44,15 @@ import threading
 import time
 from collections.abc import Coroutine
 from datetime import timezone
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import InputError
-from ..pipeline import FusedFrame
-from .config import OpcUaConfig, read_users
-from .homeassistant import RigEntities
+from ...errors import InputError
+from ...pipeline import FusedFrame
+from ..config import OpcUaConfig, read_users
+from ..failsafe import SENSOR_FAULT
+from ..logs import logger
+from ..workers import Worker
+from .base import Output, OutputContext, RigEntities
 
 if TYPE_CHECKING:
     from asyncua import Node, Server
@@ -58,22 +60,26 @@ if TYPE_CHECKING:
 INSTALL = "the monitor's OPC UA server needs the opcua extra: pip install 'thermodepth[opcua]'"
 SEVERITY = {"alarm": 800, "escalated": 800, "acknowledged": 300, "clear": 100}
 STATS = ("Max", "Mean", "Min")
+STATUS_EVERY_S = 1.0
+BEAT_S = 0.5
+WORKER_LIMIT_S = 30.0
 
 
-class OpcUaServer:
+class OpcUaOutput(Output):
     """The server of a monitor's rigs (module docstring); ``start`` binds its endpoint (one
-    InputError line when it cannot), ``stop`` ends it; the rest may come from any thread and
-    never waits for the server."""
+    InputError line when it cannot) and serves on a worker of its own (restarted when it
+    fails); the rest may come from any thread and never waits for the server."""
 
-    def __init__(
-        self, config: OpcUaConfig, rigs: list[RigEntities], storage: Path, log: Any
-    ) -> None:
+    name = "opcua"
+
+    def __init__(self, config: OpcUaConfig, context: OutputContext) -> None:
         try:
             import asyncua  # noqa: F401
         except ImportError:
             raise InputError(INSTALL) from None
-        self.config, self.rigs, self.log = config, rigs, log
-        self.certificates = config.certificate_dir or storage / "opcua"
+        self.config, self.rigs, self.context = config, context.rigs, context
+        self.log = logger("opcua")
+        self.certificates = config.certificate_dir or context.config.storage.path / "opcua"
         self.users = read_users(config.users_file) if config.users_file else {}
         self.nodes: dict[str, Node] = {}
         self.emitters: dict[str, Any] = {}
@@ -81,14 +87,17 @@ class OpcUaServer:
         self.server: Server | None = None
         self.namespace = 0
         self._last: dict[str, float] = {}
+        self._last_status = float("-inf")
         self._pending: dict[str, FusedFrame] = {}  # a rig's newest frame not yet written
         self._lock = threading.Lock()
         self._ready = threading.Event()
         self._error: BaseException | None = None
-        self._stopped: asyncio.Event | None = None
-        self._thread = threading.Thread(target=self._main, name="opcua", daemon=True)
+        self.worker = Worker("opcua", self._main, BEAT_S * 4, WORKER_LIMIT_S, self.log)
 
-    # -- the server's own thread ---------------------------------------------------------------
+    def describe(self) -> str:
+        return describe(self.config)
+
+    # -- the server's own worker ---------------------------------------------------------------
 
     def start(self, timeout_s: float = 30.0) -> None:
         host, port = self.config.address()
@@ -100,19 +109,30 @@ class OpcUaServer:
             raise InputError(
                 f"opcua.endpoint: {self.config.endpoint}: cannot listen ({exc.strerror or exc})"
             ) from None
-        self._thread.start()
+        self.worker.start()
         if not self._ready.wait(timeout_s) or self._error is not None:
+            self.worker.stop()
             raise InputError(f"opcua: the server did not start ({self._error or 'no answer'})")
 
-    def _main(self) -> None:
-        try:
-            asyncio.run(self._serve())
-        except BaseException as exc:  # told by start(), or logged once running
-            self._error = exc
-            self._ready.set()
-            self.log(f"opcua: the server stopped: {exc}")
+    def workers(self) -> list[Worker]:
+        return [self.worker]
 
-    async def _serve(self) -> None:
+    def fits(self, rigs: list[RigEntities]) -> bool:
+        return rigs == self.rigs
+
+    def _main(self, worker: Worker) -> None:
+        try:
+            asyncio.run(self._serve(worker))
+        except BaseException as exc:
+            if not self._ready.is_set():  # told by start()
+                self._error = exc
+                self._ready.set()
+                return
+            raise
+        finally:
+            self.loop = None
+
+    async def _serve(self, worker: Worker) -> None:
         from asyncua import Server, ua
         from asyncua.crypto.permission_rules import SimpleRoleRuleset
         from asyncua.server.user_managers import User, UserManager, UserRole
@@ -154,12 +174,16 @@ class OpcUaServer:
             policies.append(ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt)
             await self._certificate(server)
         server.set_security_policy(policies, permission_ruleset=SimpleRoleRuleset())
+        self.nodes, self.emitters = {}, {}
         self.namespace = await server.register_namespace(self.config.namespace)
         await self._address_space(server)
-        self.loop, self.server, self._stopped = asyncio.get_running_loop(), server, asyncio.Event()
+        self.server = server
         async with server:
+            self.loop = asyncio.get_running_loop()
             self._ready.set()
-            await self._stopped.wait()
+            while not worker.stopping.is_set():
+                worker.beat()
+                await asyncio.sleep(BEAT_S)
 
     async def _certificate(self, server: Server) -> None:
         """The server's key and self-signed certificate, made on first start."""
@@ -283,7 +307,15 @@ class OpcUaServer:
                 values[f"{rig}.Rois.{roi.name}.{stat}"] = float(value)
         self._submit(self._write(values, fused.thermal_time_s))
 
-    def status(self, rig: dict[str, Any]) -> None:
+    def tick(self, now_mono: float) -> None:
+        """The frames held back whose time has come; every rig's figures each second."""
+        self.flush()
+        if now_mono - self._last_status >= STATUS_EVERY_S:
+            self._last_status = now_mono
+            for rig in self.context.rig_status():
+                self.rig_status(rig)
+
+    def rig_status(self, rig: dict[str, Any]) -> None:
         """A rig's figures (``Monitor.status``'s entry)."""
         values = {
             f"{rig['name']}.Health": rig["health"],
@@ -294,6 +326,11 @@ class OpcUaServer:
             ),
         }
         self._submit(self._write(values, None))
+
+    def events(self, rig: str, events: list[dict[str, Any]], raised: set[str]) -> None:
+        for event in events:
+            rule = event["rule"]
+            self.event({**event, "rig": rig}, None if rule == SENSOR_FAULT else rule in raised)
 
     def event(self, event: dict[str, Any], raised: bool | None) -> None:
         """An event of a rig: its rule's state (``raised``: whether it is raised now; None
@@ -311,7 +348,7 @@ class OpcUaServer:
     async def _emit(self, event: dict[str, Any], values: dict[str, Any]) -> None:
         from asyncua import ua
 
-        from ..alarms import event_line
+        from ...alarms import event_line
 
         await self._write(values, event.get("time_s"))
         emitter = self.emitters.get(event["rig"])
@@ -324,7 +361,12 @@ class OpcUaServer:
         emitter.event.Message = ua.LocalizedText(event_line(event))
         await emitter.trigger()
 
-    def stop(self) -> None:
-        if self.loop is not None and self._stopped is not None and not self.loop.is_closed():
-            self.loop.call_soon_threadsafe(self._stopped.set)
-        self._thread.join(10.0)
+    def status(self) -> dict[str, Any]:
+        return {"endpoint": self.config.endpoint, "serving": self.loop is not None}
+
+
+def describe(config: OpcUaConfig) -> str:
+    """The output of an ``opcua`` section in one line."""
+    users = "users from " + str(config.users_file) if config.users_file else "no users"
+    who = f"anonymous and {users}" if config.anonymous else users
+    return f"OPC UA {config.endpoint} (security {', '.join(config.security)}; {who})"

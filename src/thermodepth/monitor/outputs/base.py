@@ -1,0 +1,108 @@
+"""What every output of the monitor is: a small interface (:class:`Output`) the service drives
+the same way for each, and what it gives them (:class:`OutputContext`).
+
+An output is told each rig's fused frames (:meth:`Output.measured`, at the rig's rate: it keeps
+its own), each rig's events once they are in the event store (:meth:`Output.events`), and the
+monitor's clock (:meth:`Output.tick`). It starts in two steps: :meth:`Output.start` binds or
+connects (one InputError line when it cannot) and says nothing to anyone; once every part of
+the monitor has started, :meth:`Output.announce` tells the world (a broker's retained states,
+discovery). Its long-running loops are :class:`~..workers.Worker` s the monitor supervises
+(:meth:`Output.workers`). A reload keeps it when :meth:`Output.fits` the new rigs, else builds it
+again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+
+if TYPE_CHECKING:
+    from ...pipeline import FusedFrame
+    from ..config import MonitorConfig
+    from ..live import Picture
+    from ..store import EventStore
+    from ..workers import Worker
+
+Acknowledge = Callable[[str, str, str], list[dict[str, Any]]]
+"""``acknowledge(rig, rule, by)``: the events of an acknowledgement (AckRefusedError when it
+cannot be)."""
+Pictures = Callable[[str, str, "int | None"], "Picture | None"]
+"""``picture(rig, what, width)``: a rig's live ``overlay`` (JPEG) or ``thermal`` (PNG)."""
+
+
+class RigEntities(NamedTuple):
+    """What a rig shows a plant's systems: its name, location, ROIs and alarm rules."""
+
+    name: str
+    location: str | None
+    rois: list[str]
+    rules: list[str]
+
+
+@dataclass
+class OutputContext:
+    """What the monitor gives an output's builder: the config, the rigs, the event store (its
+    outbox), how to acknowledge, the live pictures, whom to tell when an event has been
+    delivered (``delivered(event)``: the latency figures) and the rigs' status now
+    (``rig_status()``: ``/api/status``'s ``rigs``)."""
+
+    config: MonitorConfig
+    rigs: list[RigEntities]
+    store: EventStore
+    acknowledge: Acknowledge
+    picture: Pictures
+    delivered: Callable[[dict[str, Any]], None]
+    rig_status: Callable[[], list[dict[str, Any]]]
+
+
+class Output:
+    """One of the monitor's outputs (module docstring); every method but :meth:`describe` and
+    :meth:`start` may be left as it is."""
+
+    name: ClassVar[str]
+    outbox: ClassVar[bool] = False
+    """Its events are delivered from the event store's outbox (kept on disk until it has
+    them)."""
+
+    def describe(self) -> str:
+        """One line: what it serves or where it sends (``monitor --check``, the log)."""
+        raise NotImplementedError
+
+    def start(self) -> None:
+        """Bind or connect, telling no one yet; InputError (one line) when it cannot."""
+        raise NotImplementedError
+
+    def announce(self, raised: dict[str, set[str]]) -> None:
+        """Every part has started: say so (``raised``: each rig's raised rules)."""
+
+    def workers(self) -> list[Worker]:
+        """Its long-running loops, for the monitor to start and supervise."""
+        return []
+
+    def measured(self, rig: str, fused: FusedFrame) -> None:
+        """A rig's fused frame (the rig's thread: never wait here)."""
+
+    def events(self, rig: str, events: list[dict[str, Any]], raised: set[str]) -> None:
+        """A rig's events, stored (each with its ``id``); ``raised``: its rules raised now."""
+
+    def wake(self) -> None:
+        """New rows in the outbox (an outbox output)."""
+
+    def send_now(self, event: dict[str, Any]) -> None:
+        """An event the store could not keep, sent from memory (an outbox output)."""
+
+    def tick(self, now_mono: float) -> None:
+        """The monitor's clock (every :data:`~..service.TICK_S`)."""
+
+    def fits(self, rigs: list[RigEntities]) -> bool:
+        """Whether it can go on as it is with these rigs after a reload (else it is built
+        again)."""
+        return True
+
+    def status(self) -> dict[str, Any]:
+        """What ``/api/status`` shows of it (``outputs.NAME``)."""
+        return {}
+
+    def stop(self, reason: str = "stopped") -> None:
+        """Stop (its workers are stopped by the monitor first)."""
