@@ -39,7 +39,9 @@ NEAR = RoiSettings(name="near", depth_range_m=(0.9, 1.1))
 ALARMS = [
     AlarmSettings(name="hot", above_c=60.0),  # the hotspot: no ROI
     AlarmSettings(name="plate-hot", what="plate", above_c=60.0),
-    AlarmSettings(name="plate-vs", what="plate", delta_c=5.0, relative_to="beside"),
+    AlarmSettings(
+        name="plate-vs", what="plate", delta_c=5.0, relative_to="beside", level="warning"
+    ),
     AlarmSettings(name="near-hot", what="near", above_c=60.0),
     AlarmSettings(name="never", what="beside", above_c=500.0),
 ]
@@ -142,10 +144,12 @@ def test_label_place_over_the_box_only_where_nothing_else_has_room() -> None:
 def test_alarm_rois_are_the_subject_and_the_reference_of_the_raised_rules(scene: Any) -> None:
     pipe, _ = scene
     rules = pipe.alarms.rules
-    assert alarm_rois(rules, {"hot"}) == set()
-    assert alarm_rois(rules, {"plate-hot"}) == {"plate"}
-    assert alarm_rois(rules, {"plate-vs", "near-hot"}) == {"plate", "beside", "near"}
-    assert alarm_rois(rules, set()) == set()
+    assert alarm_rois(rules, {"hot"}) == {}
+    assert alarm_rois(rules, {"plate-hot"}) == {"plate": "alarm"}
+    assert alarm_rois(rules, {"plate-vs", "near-hot"}) == {
+        "plate": "warning", "beside": "warning", "near": "alarm"}  # fmt: skip
+    assert alarm_rois(rules, {"plate-vs", "plate-hot"})["plate"] == "alarm"  # the higher
+    assert alarm_rois(rules, set()) == {}
 
 
 def test_the_live_overlay_outlines_a_raised_rules_roi_in_red(scene: Any) -> None:
@@ -158,7 +162,7 @@ def test_the_live_overlay_outlines_a_raised_rules_roi_in_red(scene: Any) -> None
     live = LiveView(rois, (15.0, 80.0))
     live.wanted()
     live.fused(frame, pipe.alarms)
-    assert live.marked == {"plate", "beside", "near"}
+    assert live.marked == {"plate": "alarm", "beside": "warning", "near": "alarm"}
     picture = live.picture("overlay")
     assert picture is not None
     shown = np.asarray(cv2.imdecode(np.frombuffer(picture.data, np.uint8), cv2.IMREAD_COLOR))
@@ -188,19 +192,19 @@ def test_the_live_overlay_forgets_a_latched_rule_once_acknowledged(scene: Any) -
     live = LiveView([PLATE.roi()], (15.0, 80.0))
     live.wanted()
 
-    def shown(plate_max_c: float) -> frozenset[str]:
+    def shown(plate_max_c: float) -> dict[str, str]:
         tracker.update(frame.thermal_time_s, frame.index, [],
                        [RoiStats("plate", 100, 40.0, plate_max_c, 30.0, 1.0)])  # fmt: skip
         live.last_s = 0.0  # the next frame is kept, however soon
         live.fused(frame, tracker)
         return live.marked
 
-    assert shown(50.0) == frozenset()
-    assert shown(70.0) == {"plate"}
-    assert shown(50.0) == {"plate"}  # back, but latched: raised until acknowledged
+    assert shown(50.0) == {}
+    assert shown(70.0) == {"plate": "alarm"}
+    assert shown(50.0) == {"plate": "alarm"}  # back, but latched: raised until acknowledged
     events = tracker.acknowledge("plate-latched", "jane")
     assert [e["event"] for e in events] == ["acknowledged", "clear"]  # not a frame's events
-    assert shown(50.0) == frozenset()
+    assert shown(50.0) == {}
 
 
 # -- an event's evidence ----------------------------------------------------------------------

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -146,8 +146,8 @@ def overlay_rgb(frame: FusedFrame, range_c: tuple[float, float]) -> NDArray[np.f
 MIN_OUTLINE_PX = 64
 """A depth-range ROI's pieces smaller than this (pixels) are not outlined: depth noise."""
 ALARM_RGB = (1.0, 0.16, 0.16)
-"""An ROI whose alarm rule is raised is outlined in this red (RGB 0-1), thicker than the
-others' white, and labelled ``ALARM``."""
+"""An ROI that a raised alarm rule watches is outlined in this red (RGB 0-1), thicker than
+the others' white, and labelled with the rule's level (``plate: ALARM``, ``plate: WARNING``)."""
 
 
 def roi_outlines(roi: Roi, depth_m: NDArray[np.floating]) -> list[NDArray[np.int32]]:
@@ -172,13 +172,16 @@ def roi_outlines(roi: Roi, depth_m: NDArray[np.floating]) -> list[NDArray[np.int
     return [c[:, 0, :].astype(np.int32) for c in contours if cv2.contourArea(c) >= MIN_OUTLINE_PX]
 
 
-def alarm_rois(rules: Iterable[AlarmRule], names: Collection[str]) -> set[str]:
-    """The ROIs that the rules named ``names`` watch: each one's subject (``what``, unless it
-    is the hotspot) and a delta rule's reference ROI (``relative_to``)."""
-    out: set[str] = set()
+def alarm_rois(rules: Iterable[AlarmRule], names: Collection[str]) -> dict[str, str]:
+    """The ROIs that the rules named ``names`` watch, each with the highest level of those
+    rules (``alarm`` or ``warning``): a rule's subject (``what``, unless it is the hotspot)
+    and a delta rule's reference ROI (``relative_to``)."""
+    out: dict[str, str] = {}
     for rule in rules:
         if rule.name in names:
-            out.update(r for r in (rule.what, rule.relative_to) if r and r != "hotspot")
+            for roi in (rule.what, rule.relative_to):
+                if roi and roi != "hotspot" and out.get(roi) != "alarm":
+                    out[roi] = rule.level
     return out
 
 
@@ -200,7 +203,7 @@ def plot_overlay(
     vmin_c: float | None = None,
     vmax_c: float | None = None,
     rois: Sequence[Roi] = (),
-    marked: Collection[str] = (),
+    marked: Mapping[str, str] | None = None,
 ) -> Path:
     """The fused temperature (colour map) over the depth camera's IR image (or a shaded
     depth map), the pixels without a temperature tinted by why (legend), hotspot boxes
@@ -209,8 +212,8 @@ def plot_overlay(
     them for every image of a run or a report (:func:`display_range_c`), so that a colour
     means one temperature throughout; None: this frame's own (:func:`display_range_c`).
     ``rois``: outlined in white with their names (a depth range only when marked); those
-    named in ``marked`` (an alarm's, :func:`alarm_rois`) in :data:`ALARM_RGB`, thicker,
-    labelled ``NAME: ALARM``."""
+    in ``marked`` (name: level of the raised rule that watches it, :func:`alarm_rois`) in
+    :data:`ALARM_RGB`, thicker, labelled ``NAME: LEVEL``."""
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
     from matplotlib.patches import Patch, Polygon, Rectangle
@@ -231,6 +234,7 @@ def plot_overlay(
     rgb = overlay_rgb(frame, (lo_c, hi_c))
     ax.imshow(rgb, interpolation="nearest")
     im = ScalarMappable(Normalize(lo_c, hi_c), "inferno")
+    marked = marked or {}
     for roi in rois:
         alarm = roi.name in marked
         if not alarm and isinstance(roi, DepthRangeRoi):
@@ -241,10 +245,15 @@ def plot_overlay(
             ax.add_patch(Polygon(pts, closed=True, fill=False, ec=color, lw=2.5 if alarm else 1))
         if outlines:
             u, v = min((tuple(p) for pts in outlines for p in pts), key=lambda p: (p[1], p[0]))
-            ax.text(u + 2, v + 2, f"{roi.name}: ALARM" if alarm else roi.name, va="top",
-                    color="white", fontsize=8 if alarm else 7, fontweight="bold" if alarm else None,
-                    bbox={"facecolor": color if alarm else "black", "alpha": 0.8 if alarm else 0.5,
-                          "pad": 1, "lw": 0})  # fmt: skip
+            text = f"{roi.name}: {marked[roi.name].upper()}" if alarm else roi.name
+            back = (
+                {"facecolor": color, "alpha": 0.8}
+                if alarm
+                else {"facecolor": "black", "alpha": 0.5}
+            )
+            ax.text(u + 2, v + 2, text, va="top", color="white", fontsize=8 if alarm else 7,
+                    fontweight="bold" if alarm else None,
+                    bbox={**back, "pad": 1, "lw": 0})  # fmt: skip
     for hs in frame.hotspots:
         box = hotspot_box_on_depth(
             hs, frame.z_thermal_m, cal.thermal, cal.depth, cal.thermal_from_depth

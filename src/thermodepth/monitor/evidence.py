@@ -299,7 +299,7 @@ class Evidence:
         _ = fused.on_depth
         pipe = clip.pipeline
         rois = pipe.rois if pipe is not None else []
-        marked = alarm_rois(pipe.alarms.rules, {event["rule"]}) if pipe is not None else set()
+        marked = alarm_rois(pipe.alarms.rules, {event["rule"]}) if pipe is not None else {}
         title = (
             f"{clip.id}: {event['event'].upper()} {event['rule']}, frame {fused.index}, "
             f"VOx {fused.vox_label}"

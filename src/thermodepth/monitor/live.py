@@ -15,7 +15,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from collections.abc import Collection
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -111,16 +111,17 @@ def overlay_image(
     frame: FusedFrame,
     range_c: tuple[float, float],
     rois: list[Roi],
-    marked: Collection[str] = (),
+    marked: Mapping[str, str] | None = None,
 ) -> NDArray[np.uint8]:
     """The overlay of a fused frame (its depth grid sampled), BGR uint8 (H, W, 3): the
     figure's image (:func:`~thermodepth.figures.overlay_rgb`), hotspot boxes (cyan when
     resolvable, yellow when too small to read true) labelled in C and metres above the box
     (below at the top edge: never under it), ROIs outlined in white with their names (a
-    depth-range ROI only when marked); those named in ``marked`` (an alarm raised on them)
-    in red, thicker, labelled ``NAME: ALARM``."""
+    depth-range ROI only when marked); those in ``marked`` (name: the level of a raised
+    rule that watches it) in red, thicker, labelled ``NAME: LEVEL``."""
     img = _bgr(overlay_rgb(frame, range_c))
     cal = frame.calibration
+    marked = marked or {}
     for roi in rois:
         alarm = roi.name in marked
         if isinstance(roi, DepthRangeRoi) and not alarm:
@@ -133,7 +134,13 @@ def overlay_image(
                       smooth)  # fmt: skip
         u, v = min((tuple(p) for pts in outlines for p in pts), key=lambda p: (p[1], p[0]))
         if alarm:
-            _label(img, f"{roi.name}: ALARM", (int(u) + 3, int(v) + 3), WHITE, ALARM_BGR)
+            _label(
+                img,
+                f"{roi.name}: {marked[roi.name].upper()}",
+                (int(u) + 3, int(v) + 3),
+                WHITE,
+                ALARM_BGR,
+            )
         else:
             _label(img, roi.name, (int(u) + 2, int(v) + 2), WHITE)
     for hs in frame.hotspots:
@@ -205,7 +212,7 @@ class LiveView:
     rois: list[Roi]
     range_c: tuple[float, float] | None = None
     frame: FusedFrame | None = None
-    marked: frozenset[str] = frozenset()
+    marked: dict[str, str] = field(default_factory=dict)
     wanted_until: float = 0.0
     last_s: float = 0.0
     trend: Trend = field(default_factory=Trend)
@@ -227,7 +234,7 @@ class LiveView:
         _ = fused.on_depth
         if self.range_c is None and np.isfinite(fused.temp_thermal_c).any():
             self.range_c = display_range_c(fused.temp_depth_c)
-        marked = frozenset(alarm_rois(alarms.rules, alarms.raised)) if alarms else frozenset()
+        marked = alarm_rois(alarms.rules, alarms.raised) if alarms else {}
         with self._lock:
             self.frame, self.marked = fused, marked
             self._cache.clear()

@@ -6,7 +6,7 @@ raised at that frame)."""
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from ..alarms import RAISED
@@ -24,11 +24,11 @@ def write_snapshot(
     title: str,
     range_c: tuple[float, float],
     rois: Sequence[Roi] = (),
-    marked: Collection[str] = (),
+    marked: Mapping[str, str] | None = None,
 ) -> None:
     """The overlay PNG and the PLY point cloud of a fused frame, coloured on ``range_c``
-    (C); the overlay with ``rois`` outlined, in red those named in ``marked`` (an alarm's:
-    :func:`~thermodepth.figures.alarm_rois`)."""
+    (C); the overlay with ``rois`` outlined, in red those in ``marked`` (name: level of the
+    raised rule that watches it, :func:`~thermodepth.figures.alarm_rois`)."""
     lo, hi = range_c
     plot_overlay(fused, png, title, lo, hi, rois, marked)
     points, temps = fused.points()
@@ -66,7 +66,7 @@ class SnapshotSink(BaseSink):
         png = self.folder / f"frame_{fused.index:06d}.png"
         pipe = self._pipeline
         rois = pipe.rois if pipe is not None else []
-        marked = alarm_rois(pipe.alarms.rules, alarms) if pipe is not None else set()
+        marked = alarm_rois(pipe.alarms.rules, alarms) if pipe is not None else {}
         write_snapshot(fused, png, png.with_suffix(".ply"), title, self.range_c, rois, marked)
         self.written += 1
         self.at_alarms += bool(alarms)
