@@ -6,6 +6,7 @@ chromium-driver or selenium are absent."""
 
 from __future__ import annotations
 
+import math
 import re
 import threading
 import time
@@ -150,6 +151,15 @@ def test_a_stale_rigs_last_picture_is_dimmed_dated_and_not_asked_again(rigs: Any
     assert re.search(r"the last, \d+ (s|min) ago", hottest), hottest
 
 
+def scale(values: list[float]) -> tuple[float, float]:
+    """A sparkline's scale (C): its values' lowest and highest, 0.1 C outward, at least
+    1 C apart (about their middle)."""
+    mid = (min(values) + max(values)) / 2
+    return math.floor(min(*values, mid - 0.5) * 10) / 10, math.ceil(
+        max(*values, mid + 0.5) * 10
+    ) / 10
+
+
 def test_the_roi_trend_has_its_scale(rigs: Any) -> None:
     monitor, driver, _, _ = rigs
     driver.get(f"{monitor.http.url}/rig/live")
@@ -163,7 +173,7 @@ def test_the_roi_trend_has_its_scale(rigs: Any) -> None:
             const box = (s) => t.querySelector(s).getBoundingClientRect();
             const when = [...t.querySelectorAll(".when span")].map((e) => e.innerText);
             const text = (s) => t.querySelector(s).innerText;
-            return {trend, hi: text(".hi"), lo: text(".lo"),
+            return {trend, n: Number(t.dataset.points), hi: text(".hi"), lo: text(".lo"),
                     when, size: parseFloat(getComputedStyle(t.querySelector(".hi")).fontSize),
                     svg: box("svg"), hiBox: box(".hi"), loBox: box(".lo")};"""
         )
@@ -171,12 +181,13 @@ def test_the_roi_trend_has_its_scale(rigs: Any) -> None:
             return None
         points = [p for p in got["trend"] if p["rois"].get("plate") is not None]
         values = [p["rois"]["plate"] for p in points]
-        if len(values) < 2 or got["hi"] != f"{max(values):.1f} °C":
-            return None
-        return got, points, values
+        # the page drawn from the trend as fetched here (a point comes every 10 s)
+        return (got, points, values) if len(values) >= 2 and got["n"] == len(values) else None
 
     got, points, values = wait_for(agree, 60, every_s=0.5)  # a point every 10 s
-    assert got["lo"] == f"{min(values):.1f} °C"
+    lo, hi = scale(values)
+    assert (got["lo"], got["hi"]) == (f"{lo:.1f} °C", f"{hi:.1f} °C")
+    assert lo <= min(values) and max(values) <= hi and hi - lo > 0.999
     t0, t1 = points[0]["time_s"], points[-1]["time_s"]
     start, span, end = got["when"]
     assert start == time.strftime("%H:%M", time.localtime(t0))
@@ -185,6 +196,6 @@ def test_the_roi_trend_has_its_scale(rigs: Any) -> None:
     assert span == (f"{int(seconds)} s" if seconds < 60 else f"{int(seconds // 60)} min")
     # readable: 12 px type, max at the top of the line, min at its bottom, beside it
     assert got["size"] >= 12
-    svg, hi, lo = got["svg"], got["hiBox"], got["loBox"]
-    assert hi["left"] >= svg["right"] and lo["left"] >= svg["right"]
-    assert abs(hi["top"] - svg["top"]) < 6 and abs(lo["bottom"] - svg["bottom"]) < 6
+    svg, top, bottom = got["svg"], got["hiBox"], got["loBox"]
+    assert top["left"] >= svg["right"] and bottom["left"] >= svg["right"]
+    assert abs(top["top"] - svg["top"]) < 6 and abs(bottom["bottom"] - svg["bottom"]) < 6

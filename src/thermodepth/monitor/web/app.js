@@ -177,18 +177,23 @@ async function overview() {
 // A clock time (local, 24 h) of a Unix time in seconds: 14:07
 const clock = (t) => { const d = new Date(t * 1000); return `${String(d.getHours()).padStart(2, "0")}:${String(d.getMinutes()).padStart(2, "0")}`; };
 
-// A trend as a sparkline with its scale: its highest and lowest value (°C) at the right of
-// its top and bottom, when it begins and ends (clock times; a replay's own times: how long)
-// under it. points: [{time_s, value}], value null where there was none.
+// A trend as a sparkline with its scale: the temperatures (°C) of its top and bottom at their
+// right (its highest and lowest values, 0.1 °C outward, the scale at least SPARK_MIN_C tall:
+// a sensor's noise is not drawn as a swing), when it begins and ends (clock times; a
+// replay's own times: how long ago) under it. points: [{time_s, value}], value null where
+// there was none.
+const SPARK_MIN_C = 1;
 function spark(points) {
   const p = points.filter((x) => x.value !== null && x.value !== undefined && Number.isFinite(x.value));
   if (p.length < 2) return `<span class="muted">${p.length ? `${num(p[0].value)} °C so far` : "–"}</span>`;
-  const vs = p.map((x) => x.value), lo = Math.min(...vs), hi = Math.max(...vs), span = hi - lo || 1;
+  const vs = p.map((x) => x.value), mid = (Math.min(...vs) + Math.max(...vs)) / 2;
+  const lo = Math.floor(Math.min(...vs, mid - SPARK_MIN_C / 2) * 10) / 10;
+  const hi = Math.ceil(Math.max(...vs, mid + SPARK_MIN_C / 2) * 10) / 10, span = hi - lo;
   const t0 = p[0].time_s, t1 = p.at(-1).time_s, dt = t1 - t0 || 1;
   const W = 200, H = 40, x = (t) => ((t - t0) / dt) * W, y = (v) => H - 3 - ((v - lo) / span) * (H - 6);
   const line = p.map((q) => `${x(q.time_s).toFixed(1)},${y(q.value).toFixed(1)}`).join(" ");
   const unix = t0 > 1e9; // a live rig's times; a replay's run from its own start
-  return `<div class="trend" data-max="${hi}" data-min="${lo}" data-span-s="${t1 - t0}">
+  return `<div class="trend" data-points="${p.length}">
     <svg class="spark" viewBox="0 0 ${W} ${H}" preserveAspectRatio="none" role="img"
       aria-label="from ${num(lo)} to ${num(hi)} °C over ${ago(t1 - t0)}">
       <line class="edge" x1="0" x2="${W}" y1="3" y2="3"/><line class="edge" x1="0" x2="${W}" y1="${H - 3}" y2="${H - 3}"/>
