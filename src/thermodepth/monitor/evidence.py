@@ -301,7 +301,8 @@ class Evidence:
         rois = pipe.rois if pipe is not None else []
         marked = alarm_rois(pipe.alarms.rules, {event["rule"]}) if pipe is not None else {}
         title = (
-            f"{clip.id}: {event['event'].upper()} {event['rule']}, frame {fused.index}, "
+            f"{clip.id}: {event['event'].upper()} {event['rule']} [{event.get('level', 'alarm')}], "
+            f"frame {fused.index}, "
             f"VOx {fused.vox_label}"
         )
         try:
