@@ -92,7 +92,7 @@ def main() -> None:
             snapshot = httpx.get(f"{url}/api/events/{raised['id']}/snapshot.png",
                                  headers={"Authorization": "Bearer s3cret"})  # fmt: skip
             png = np.frombuffer(snapshot.raise_for_status().content, np.uint8)
-            img = cv2.imdecode(png, cv2.IMREAD_COLOR)  # at 2/3 size: a page need not hold more
+            img = np.asarray(cv2.imdecode(png, cv2.IMREAD_COLOR))  # at 2/3: a page needs no more
             small = cv2.resize(img, None, fx=2 / 3, fy=2 / 3, interpolation=cv2.INTER_AREA)
             cv2.imwrite(
                 str(OUT / "dashboard-snapshot.png"), small, [cv2.IMWRITE_PNG_COMPRESSION, 9]
