@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -35,19 +36,33 @@ GUIDE = ROOT / "docs" / "new-rig.md"
 LIVE = "realsense+lepton"
 
 
-def guide_steps() -> list[tuple[list[str], list[str]]]:
-    """(commands, expected output lines) of each ```sh block of the guide, in order; the
-    expected lines are those of the ```text block right after it (if any)."""
-    blocks = re.findall(r"```(sh|text)\n(.*?)```", GUIDE.read_text(), flags=re.S)
-    steps: list[tuple[list[str], list[str]]] = []
+@dataclass
+class Step:
+    """A step of the guide: the files its ```yaml blocks write (those that begin with a
+    ``# NAME`` line), then its ```sh block's commands, and the lines their output holds
+    (the ```text block right after it, if any)."""
+
+    files: dict[str, str] = field(default_factory=dict)
+    commands: list[str] = field(default_factory=list)
+    expected: list[str] = field(default_factory=list)
+
+
+def guide_steps() -> list[Step]:
+    """The guide's steps, in order (:class:`Step`)."""
+    blocks = re.findall(r"```(sh|text|yaml)\n(.*?)```", GUIDE.read_text(), flags=re.S)
+    steps: list[Step] = [Step()]
     for kind, body in blocks:
-        if kind == "sh":
+        if kind == "yaml":
+            name = re.match(r"# (\S+)\n", body)
+            assert name, f"a yaml block of the guide names its file first: {body[:40]!r}"
+            steps[-1].files[name.group(1)] = body
+        elif kind == "sh":
             joined = body.replace("\\\n", " ")
-            commands = [line.strip() for line in joined.splitlines() if line.strip()]
-            steps.append((commands, []))
+            steps[-1].commands = [line.strip() for line in joined.splitlines() if line.strip()]
+            steps.append(Step())
         else:
-            steps[-1][1].extend(line for line in body.splitlines() if line.strip())
-    return steps
+            steps[-2].expected.extend(line for line in body.splitlines() if line.strip())
+    return [step for step in steps if step.commands]
 
 
 def stand_in(args: list[str]) -> list[str]:
@@ -66,6 +81,55 @@ def stand_in(args: list[str]) -> list[str]:
     return [*replaced, "--frames", "8"] if command == "run" else replaced
 
 
+def like(want: str, lines: list[str]) -> bool:
+    """Whether a line of ``lines`` reads as ``want``, where "..." stands for anything."""
+    pattern = ".*".join(re.escape(part) for part in want.split("..."))
+    return any(re.fullmatch(pattern, got.rstrip()) for got in lines)
+
+
+def run_monitor(config: Path, expected: list[str]) -> str:
+    """``thermodepth monitor CONFIG`` as a process, as it is run, on the simulated rig (the
+    config's live cameras replaced by ``sim``, its HTTP port by a free one) until its log
+    holds every expected line and its dashboard answers; then SIGTERM. Its log."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import httpx
+
+    text = config.read_text()
+    config.write_text(text.replace(f"source: {LIVE}", "source: sim")
+                      .replace("listen: 127.0.0.1:8088", "listen: 127.0.0.1:0"))  # fmt: skip
+    log = config.with_suffix(".log")
+    with open(log, "wb") as out:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "thermodepth.cli", "monitor", str(config)],
+            stdout=out,
+            stderr=out,
+        )
+    try:
+        end = time.monotonic() + 120  # far beyond the ~10 s it takes
+        while True:
+            lines = log.read_text(errors="replace").splitlines()
+            url = next((m.group(1) for line in lines
+                        if (m := re.search(r"HTTP on (http://\S+)", line))), None)  # fmt: skip
+            if url and all(like(want, lines) for want in expected):
+                break
+            assert proc.poll() is None, f"the monitor stopped:\n{log.read_text()}"
+            assert time.monotonic() < end, f"not every line of the guide came:\n{log.read_text()}"
+            time.sleep(0.2)
+        with httpx.Client(base_url=url, timeout=10) as http:
+            assert http.get("/healthz").status_code == 200  # the rig's data are fresh
+            assert "app.js" in http.get("/").text  # the dashboard, open on this machine
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(60)
+    assert code == 0, log.read_text()
+    assert "monitor: stopped" in log.read_text()
+    return log.read_text()
+
+
 def test_new_rig_guide_runs_on_the_simulated_rig(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -81,27 +145,30 @@ def test_new_rig_guide_runs_on_the_simulated_rig(
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("THERMODEPTH", str(ROOT))
     steps = guide_steps()
-    assert len(steps) >= 9
+    assert len(steps) >= 11
     ran = 0
-    for commands, expected in steps:
+    for step in steps:
+        for name, text in step.files.items():
+            (tmp_path / name).write_text(text)
         output = ""
-        for line in commands:
+        for line in step.commands:
             args = shlex.split(os.path.expandvars(line))
             if args[0] == "cp":
                 shutil.copy(args[1], args[2])
                 continue
             assert args[0] == "thermodepth", line
+            if args[1:2] == ["monitor"] and "--check" not in args:  # until it is stopped
+                output += run_monitor(tmp_path / args[2], step.expected)
+                ran += 1
+                continue
             result = runner.invoke(app, stand_in(args[1:]))
             assert result.exit_code == 0, f"{line}\n{result.output}"
             output += result.output
             ran += 1
         lines = output.splitlines()
-        for want in expected:  # "..." stands for anything
-            pattern = ".*".join(re.escape(part) for part in want.split("..."))
-            assert any(re.fullmatch(pattern, got.rstrip()) for got in lines), (
-                f"{commands}: no line like {want!r} in\n{output}"
-            )
-    assert ran >= 12
+        for want in step.expected:  # "..." stands for anything
+            assert like(want, lines), f"{step.commands}: no line like {want!r} in\n{output}"
+    assert ran >= 16
 
 
 def test_example_settings_hold_every_section() -> None:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -14,7 +16,9 @@ from .registration import Reason
 from .sweep import SweepTable
 
 if TYPE_CHECKING:
+    from .alarms import AlarmRule
     from .evaluation import RegistrationError
+    from .measure import Roi
     from .pipeline import FusedFrame
 
 
@@ -139,6 +143,48 @@ def overlay_rgb(frame: FusedFrame, range_c: tuple[float, float]) -> NDArray[np.f
     return rgb
 
 
+MIN_OUTLINE_PX = 64
+"""A depth-range ROI's pieces smaller than this (pixels) are not outlined: depth noise."""
+ALARM_RGB = (1.0, 0.16, 0.16)
+"""An ROI that a raised alarm rule watches is outlined in this red (RGB 0-1), thicker than
+the others' white, and labelled with the rule's level (``plate: ALARM``, ``plate: WARNING``)."""
+
+
+def roi_outlines(roi: Roi, depth_m: NDArray[np.floating]) -> list[NDArray[np.int32]]:
+    """Where an ROI is on the depth image, as closed outlines, each an (N, 2) array of pixel
+    vertices (u, v): a rectangle's corners (its last pixels inside), a polygon's vertices, a
+    depth range's outer edges of its pieces in ``depth_m`` ((H, W), m) of at least
+    :data:`MIN_OUTLINE_PX` pixels (none: an empty list)."""
+    from .measure import PolygonRoi, RectRoi
+
+    if isinstance(roi, RectRoi):
+        corners = [
+            (roi.u0, roi.v0),
+            (roi.u1 - 1, roi.v0),
+            (roi.u1 - 1, roi.v1 - 1),
+            (roi.u0, roi.v1 - 1),
+        ]
+        return [np.array(corners, np.int32)]
+    if isinstance(roi, PolygonRoi):
+        return [np.round(np.asarray(roi.vertices)).astype(np.int32)]
+    mask = roi.mask(depth_m.shape, depth_m).astype(np.uint8)
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    return [c[:, 0, :].astype(np.int32) for c in contours if cv2.contourArea(c) >= MIN_OUTLINE_PX]
+
+
+def alarm_rois(rules: Iterable[AlarmRule], names: Collection[str]) -> dict[str, str]:
+    """The ROIs that the rules named ``names`` watch, each with the highest level of those
+    rules (``alarm`` or ``warning``): a rule's subject (``what``, unless it is the hotspot)
+    and a delta rule's reference ROI (``relative_to``)."""
+    out: dict[str, str] = {}
+    for rule in rules:
+        if rule.name in names:
+            for roi in (rule.what, rule.relative_to):
+                if roi and roi != "hotspot" and out.get(roi) != "alarm":
+                    out[roi] = rule.level
+    return out
+
+
 def display_range_c(temp_c: NDArray[np.floating]) -> tuple[float, float]:
     """A colour scale for a run or a report, from one frame's temperatures (C): its 1st
     percentile to its maximum, widened to multiples of 5 C (15-80 C where there is none)."""
@@ -156,18 +202,23 @@ def plot_overlay(
     title: str | None = None,
     vmin_c: float | None = None,
     vmax_c: float | None = None,
+    rois: Sequence[Roi] = (),
+    marked: Mapping[str, str] | None = None,
 ) -> Path:
     """The fused temperature (colour map) over the depth camera's IR image (or a shaded
     depth map), the pixels without a temperature tinted by why (legend), hotspot boxes
     (at least :data:`MIN_BOX_PX` a side) labelled in C, metres and cm^2 where the label does
     not cover the box, and a colour bar. ``vmin_c``/``vmax_c``: the colour scale (C); give
     them for every image of a run or a report (:func:`display_range_c`), so that a colour
-    means one temperature throughout; None: this frame's own (:func:`display_range_c`)."""
+    means one temperature throughout; None: this frame's own (:func:`display_range_c`).
+    ``rois``: outlined in white with their names (a depth range only when marked); those
+    in ``marked`` (name: level of the raised rule that watches it, :func:`alarm_rois`) in
+    :data:`ALARM_RGB`, thicker, labelled ``NAME: LEVEL``."""
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
-    from matplotlib.patches import Patch, Rectangle
+    from matplotlib.patches import Patch, Polygon, Rectangle
 
-    from .measure import hotspot_box_on_depth
+    from .measure import DepthRangeRoi, hotspot_box_on_depth
 
     plt = pyplot()
     cal = frame.calibration
@@ -183,6 +234,26 @@ def plot_overlay(
     rgb = overlay_rgb(frame, (lo_c, hi_c))
     ax.imshow(rgb, interpolation="nearest")
     im = ScalarMappable(Normalize(lo_c, hi_c), "inferno")
+    marked = marked or {}
+    for roi in rois:
+        alarm = roi.name in marked
+        if not alarm and isinstance(roi, DepthRangeRoi):
+            continue  # a depth range: outlined only when its alarm is raised
+        color = ALARM_RGB if alarm else "white"
+        outlines = roi_outlines(roi, frame.depth_m)
+        for pts in outlines:
+            ax.add_patch(Polygon(pts, closed=True, fill=False, ec=color, lw=2.5 if alarm else 1))
+        if outlines:
+            u, v = min((tuple(p) for pts in outlines for p in pts), key=lambda p: (p[1], p[0]))
+            text = f"{roi.name}: {marked[roi.name].upper()}" if alarm else roi.name
+            back = (
+                {"facecolor": color, "alpha": 0.8}
+                if alarm
+                else {"facecolor": "black", "alpha": 0.5}
+            )
+            ax.text(u + 2, v + 2, text, va="top", color="white", fontsize=8 if alarm else 7,
+                    fontweight="bold" if alarm else None,
+                    bbox={**back, "pad": 1, "lw": 0})  # fmt: skip
     for hs in frame.hotspots:
         box = hotspot_box_on_depth(
             hs, frame.z_thermal_m, cal.thermal, cal.depth, cal.thermal_from_depth

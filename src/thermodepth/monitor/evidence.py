@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numcodecs import Blosc
 
+from ..figures import alarm_rois
 from ..frames import DepthFrame, FramePair, Match, Telemetry, ThermalFrame
 from ..io.recording import RecordingWriter
 from ..pipeline import FusedFrame
@@ -161,6 +162,7 @@ class Clip:
         self.id, self.folder, self.until_s = clip_id, folder, until_s
         self.started_s = before[0].thermal_time_s if before else until_s
         self.on_fault = on_fault
+        self.pipeline = context.pipeline  # its ROIs and alarm rules, for the picture
         self.events: list[dict[str, Any]] = []
         self.written = 0
         self.lost = 0
@@ -293,14 +295,19 @@ class Evidence:
         range_c: tuple[float, float] | None,
     ) -> None:
         """Queue the overlay and point cloud of the frame that began ``clip`` (its depth grid
-        sampled here, on the rig's thread: the registration is not shared)."""
+        sampled here, on the rig's thread: the registration is not shared), the ROIs
+        outlined, in red those that ``event``'s rule watches."""
         _ = fused.on_depth
+        pipe = clip.pipeline
+        rois = pipe.rois if pipe is not None else []
+        marked = alarm_rois(pipe.alarms.rules, {event["rule"]}) if pipe is not None else {}
         title = (
-            f"{clip.id}: {event['event'].upper()} {event['rule']}, frame {fused.index}, "
+            f"{clip.id}: {event['event'].upper()} {event['rule']} [{event.get('level', 'alarm')}], "
+            f"frame {fused.index}, "
             f"VOx {fused.vox_label}"
         )
         try:
-            self._pictures.put_nowait((fused, clip.folder, title, range_c))
+            self._pictures.put_nowait((fused, clip.folder, title, range_c, rois, marked))
         except queue.Full:  # a picture of an old event helps no one: the clip is kept
             self.pictures_skipped += 1
             self.log.warning(
@@ -320,13 +327,13 @@ class Evidence:
                 continue
             if item is _END:
                 return
-            fused, folder, title, range_c = item
+            fused, folder, title, range_c, rois, marked = item
             try:
                 folder.mkdir(parents=True, exist_ok=True)
                 scale = range_c or display_range_c(fused.temp_depth_c)
                 # written aside and renamed: a reader never gets half a file
                 png, ply = folder / ".overlay.png", folder / ".frame.ply"
-                write_snapshot(fused, png, ply, title, scale)
+                write_snapshot(fused, png, ply, title, scale, rois, marked)
                 os.replace(ply, folder / "frame.ply")
                 os.replace(png, folder / "overlay.png")
             except Exception as exc:

@@ -1,7 +1,8 @@
 """What a screen shows of a rig as it runs: its latest fused frame as an overlay picture (the
 temperature on the depth image, on the rig's fixed colour scale, with hotspot boxes labelled
-and ROIs outlined) and its thermal image, drawn fast (numpy and OpenCV, JPEG or PNG, no
-matplotlib), and the trend of its readings over the last hour.
+and ROIs outlined, in red those whose alarm is raised) and its thermal image, drawn fast
+(numpy and OpenCV, JPEG or PNG, no matplotlib), and the trend of its readings over the last
+hour.
 
 The depth grid of a frame is sampled on the rig's own thread (the registration is not shared
 between threads), only while someone looks (:meth:`LiveView.wanted` in the last
@@ -14,17 +15,21 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..figures import display_range_c, overlay_rgb
-from ..measure import DepthRangeRoi, PolygonRoi, RectRoi, Roi, hotspot_box_on_depth
+from ..figures import ALARM_RGB, alarm_rois, display_range_c, overlay_rgb, roi_outlines
+from ..measure import DepthRangeRoi, PolygonRoi, Roi, hotspot_box_on_depth
 from ..pipeline import FusedFrame
 from ..plotting import temperature_rgb
+
+if TYPE_CHECKING:
+    from ..alarms import AlarmTracker
 
 LIVE_HZ = 4.0
 WATCH_S = 5.0
@@ -38,46 +43,114 @@ def _bgr(rgb: NDArray[np.floating]) -> NDArray[np.uint8]:
     return np.ascontiguousarray(out[..., ::-1])
 
 
-def _label(img: NDArray[np.uint8], text: str, org: tuple[int, int], color: tuple[int, ...]) -> None:
-    """Text on a dark box, as the overlay figure labels (OpenCV's Hershey font)."""
-    font, scale, thick = cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1
-    (w, h), base = cv2.getTextSize(text, font, scale, thick)
-    x, y = org
-    y = max(y, h + 2)
-    cv2.rectangle(img, (x - 1, y - h - 2), (x + w + 1, y + base), (0, 0, 0), -1)
-    cv2.putText(img, text, (x, y), font, scale, color, thick, cv2.LINE_AA)
+FONT, FONT_SCALE, FONT_THICK = cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1
+WHITE, BLACK = (255, 255, 255), (0, 0, 0)
+ALARM_BGR = tuple(round(255 * c) for c in ALARM_RGB[::-1])
+Rect = tuple[int, int, int, int]
+"""A rectangle of pixels (x0, y0, x1, y1), both ends inside."""
+
+
+def _label_size(text: str) -> tuple[int, int]:
+    """The width and height (pixels) of a label's dark box (:func:`_label`)."""
+    (w, h), base = cv2.getTextSize(text, FONT, FONT_SCALE, FONT_THICK)
+    return w + 2, h + base + 2
+
+
+def _label(
+    img: NDArray[np.uint8],
+    text: str,
+    at: tuple[int, int],
+    color: tuple[int, ...],
+    back: tuple[int, ...] = BLACK,
+) -> Rect:
+    """Text on a box of ``back`` (black: as the overlay figure labels), the box's top left
+    corner at ``at``, kept inside the image (OpenCV's Hershey font); returns the box."""
+    th = cv2.getTextSize(text, FONT, FONT_SCALE, FONT_THICK)[0][1]
+    w, h = _label_size(text)
+    x = min(max(at[0], 0), max(img.shape[1] - w, 0))
+    y = min(max(at[1], 0), max(img.shape[0] - h, 0))
+    cv2.rectangle(img, (x, y), (x + w - 1, y + h - 1), back, -1)
+    cv2.putText(img, text, (x + 1, y + 1 + th), FONT, FONT_SCALE, color, FONT_THICK, cv2.LINE_AA)
+    return x, y, x + w - 1, y + h - 1
+
+
+def label_place(
+    box: Rect, size: tuple[int, int], shape: tuple[int, ...], gap: int = 3
+) -> tuple[int, int]:
+    """Where a label of ``size`` (w, h) goes beside ``box`` (its outer pixels) so that the box
+    never covers it: its top left corner ``gap`` pixels above the box (still apart on a
+    picture scaled to half), else below it (at the image's top edge), else to its right or
+    left (a box as tall as the image), kept inside an image of ``shape`` (H, W, ...); over
+    the box's top left corner only when none of these has room."""
+    w, h = size
+    x0, y0, x1, y1 = box
+    height, width = shape[0], shape[1]
+    if y0 - gap - h >= 0:
+        return min(max(x0, 0), max(width - w, 0)), y0 - gap - h
+    if y1 + gap + h < height:
+        return min(max(x0, 0), max(width - w, 0)), y1 + gap + 1
+    y = min(max(y0, 0), max(height - h, 0))
+    if x1 + gap + w < width:
+        return x1 + gap + 1, y
+    if x0 - gap - w >= 0:
+        return x0 - gap - w, y
+    return max(x0, 0), y
+
+
+def draw_hotspot(img: NDArray[np.uint8], box: Rect, text: str, color: tuple[int, ...]) -> Rect:
+    """A hotspot's box around the pixels ``box`` (2 px off, 2 px wide) and its label beside
+    it (:func:`label_place`); returns the label's box."""
+    u0, v0, u1, v1 = box
+    cv2.rectangle(img, (u0 - 2, v0 - 2), (u1 + 2, v1 + 2), color, 2)
+    # a line of thickness 2 reaches one pixel beyond its corners on each side
+    outer = (u0 - 3, v0 - 3, u1 + 3, v1 + 3)
+    return _label(img, text, label_place(outer, _label_size(text), img.shape), color)
 
 
 def overlay_image(
-    frame: FusedFrame, range_c: tuple[float, float], rois: list[Roi]
+    frame: FusedFrame,
+    range_c: tuple[float, float],
+    rois: list[Roi],
+    marked: Mapping[str, str] | None = None,
 ) -> NDArray[np.uint8]:
     """The overlay of a fused frame (its depth grid sampled), BGR uint8 (H, W, 3): the
     figure's image (:func:`~thermodepth.figures.overlay_rgb`), hotspot boxes (cyan when
-    resolvable, yellow when too small to read true) labelled in C and metres, ROIs outlined
-    in white with their names (a depth-range ROI has no outline)."""
+    resolvable, yellow when too small to read true) labelled in C and metres above the box
+    (below at the top edge: never under it), ROIs outlined in white with their names (a
+    depth-range ROI only when marked); those in ``marked`` (name: the level of a raised
+    rule that watches it) in red, thicker, labelled ``NAME: LEVEL``."""
     img = _bgr(overlay_rgb(frame, range_c))
     cal = frame.calibration
+    marked = marked or {}
     for roi in rois:
-        if isinstance(roi, RectRoi):
-            cv2.rectangle(img, (roi.u0, roi.v0), (roi.u1 - 1, roi.v1 - 1), (255, 255, 255), 1)
-            _label(img, roi.name, (roi.u0 + 2, roi.v0 + 14), (255, 255, 255))
-        elif isinstance(roi, PolygonRoi):
-            pts = np.round(np.asarray(roi.vertices)).astype(np.int32)
-            cv2.polylines(img, [pts], True, (255, 255, 255), 1, cv2.LINE_AA)
-            _label(img, roi.name, (int(pts[:, 0].min()) + 2, int(pts[:, 1].min()) + 14),
-                   (255, 255, 255))  # fmt: skip
+        alarm = roi.name in marked
+        if isinstance(roi, DepthRangeRoi) and not alarm:
+            continue
+        outlines = roi_outlines(roi, frame.depth_m)
+        if not outlines:
+            continue
+        smooth = cv2.LINE_AA if isinstance(roi, PolygonRoi) else cv2.LINE_8  # pixels crisp
+        cv2.polylines(img, outlines, True, ALARM_BGR if alarm else WHITE, 3 if alarm else 1,
+                      smooth)  # fmt: skip
+        u, v = min((tuple(p) for pts in outlines for p in pts), key=lambda p: (p[1], p[0]))
+        if alarm:
+            _label(
+                img,
+                f"{roi.name}: {marked[roi.name].upper()}",
+                (int(u) + 3, int(v) + 3),
+                WHITE,
+                ALARM_BGR,
+            )
         else:
-            assert isinstance(roi, DepthRangeRoi)
+            _label(img, roi.name, (int(u) + 2, int(v) + 2), WHITE)
     for hs in frame.hotspots:
         box = hotspot_box_on_depth(
             hs, frame.z_thermal_m, cal.thermal, cal.depth, cal.thermal_from_depth
         )
         if box is None:
             continue
-        u0, v0, u1, v1 = box
         color = (255, 255, 0) if hs.resolvable else (0, 255, 255)
-        cv2.rectangle(img, (u0 - 2, v0 - 2), (u1 + 2, v1 + 2), color, 2)
-        _label(img, f"{hs.max_c:.1f} C  {hs.distance_m:.2f} m", (u0, v0 - 6), color)
+        draw_hotspot(img, box, f"{hs.max_c:.1f} C  {hs.distance_m:.2f} m", color)
     return img
 
 
@@ -133,20 +206,23 @@ class Trend:
 @dataclass
 class LiveView:
     """A rig's latest pictures and trend (module docstring). ``range_c``: the colour scale
-    (None: fixed from the first frame with temperatures); ``rois``: outlined."""
+    (None: fixed from the first frame with temperatures); ``rois``: outlined, in red those
+    whose alarm rules were raised at ``frame`` (``marked``)."""
 
     rois: list[Roi]
     range_c: tuple[float, float] | None = None
     frame: FusedFrame | None = None
+    marked: dict[str, str] = field(default_factory=dict)
     wanted_until: float = 0.0
     last_s: float = 0.0
     trend: Trend = field(default_factory=Trend)
     _cache: dict[tuple[int, str, int | None], Picture] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def fused(self, fused: FusedFrame) -> None:
+    def fused(self, fused: FusedFrame, alarms: AlarmTracker | None = None) -> None:
         """A rig's fused frame (its own thread): kept for the screens while someone looks,
-        its depth grid sampled here; its readings into the trend every TREND_EVERY_S."""
+        its depth grid sampled here, with the ROIs of the rules ``alarms`` has raised now;
+        its readings into the trend every TREND_EVERY_S."""
         now = time.monotonic()
         if not fused.in_ffc:
             hot = fused.hotspots[0].max_c if fused.hotspots else None
@@ -158,8 +234,9 @@ class LiveView:
         _ = fused.on_depth
         if self.range_c is None and np.isfinite(fused.temp_thermal_c).any():
             self.range_c = display_range_c(fused.temp_depth_c)
+        marked = alarm_rois(alarms.rules, alarms.raised) if alarms else {}
         with self._lock:
-            self.frame = fused
+            self.frame, self.marked = fused, marked
             self._cache.clear()
 
     def wanted(self) -> None:
@@ -171,14 +248,14 @@ class LiveView:
         frame someone looked at."""
         self.wanted()
         with self._lock:
-            frame = self.frame
+            frame, marked = self.frame, self.marked
             key = (-1 if frame is None else frame.index, what, width)
             cached = self._cache.get(key)
         if frame is None or cached is not None:
             return cached
         range_c = self.range_c or (15.0, 80.0)
         if what == "overlay":
-            data = encode(overlay_image(frame, range_c, self.rois), "jpeg", width)
+            data = encode(overlay_image(frame, range_c, self.rois, marked), "jpeg", width)
         else:
             data = encode(thermal_image(frame, range_c), "png", width)
         picture = Picture(data, frame.thermal_time_s)

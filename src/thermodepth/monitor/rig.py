@@ -311,7 +311,8 @@ class RigSink(BaseSink):
             )
             s.rois = {r.name: {"max_c": r.max_c, "mean_c": r.mean_c, "min_c": r.min_c, "n": r.n}
                       for r in fused.rois}  # fmt: skip
-        self.live.fused(fused)
+        pipeline = self.context.pipeline if self.context is not None else None
+        self.live.fused(fused, pipeline.alarms if pipeline is not None else None)
         events = fused.events + self.watch.frame(fused, fused.thermal_time_s)
         if events:
             self.emit(self, events, fused)

@@ -1,26 +1,36 @@
 """Pictures from a run: every ``every`` fused frames, and at every alarm, an overlay PNG and
 a PLY point cloud in ``<out>/snapshots/`` (``frame_000120.png``, ``frame_000120.ply``),
 all on one colour scale (the settings' ``viewer.temp_range_c`` if given, else fixed from the
-first frame with temperatures)."""
+first frame with temperatures), the settings' ROIs outlined (in red those of the alarms
+raised at that frame)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from ..alarms import RAISED
-from ..figures import display_range_c, plot_overlay
+from ..figures import alarm_rois, display_range_c, plot_overlay
 from ..io.pointcloud import write_ply
-from ..pipeline import FusedFrame
-from .base import BaseSink
+from ..measure import Roi
+from ..pipeline import FusedFrame, Pipeline
+from .base import BaseSink, RunContext
 
 
 def write_snapshot(
-    fused: FusedFrame, png: Path, ply: Path, title: str, range_c: tuple[float, float]
+    fused: FusedFrame,
+    png: Path,
+    ply: Path,
+    title: str,
+    range_c: tuple[float, float],
+    rois: Sequence[Roi] = (),
+    marked: Mapping[str, str] | None = None,
 ) -> None:
     """The overlay PNG and the PLY point cloud of a fused frame, coloured on ``range_c``
-    (C)."""
+    (C); the overlay with ``rois`` outlined, in red those in ``marked`` (name: level of the
+    raised rule that watches it, :func:`~thermodepth.figures.alarm_rois`)."""
     lo, hi = range_c
-    plot_overlay(fused, png, title, lo, hi)
+    plot_overlay(fused, png, title, lo, hi, rois, marked)
     points, temps = fused.points()
     write_ply(ply, points, temps, lo, hi)
 
@@ -38,6 +48,10 @@ class SnapshotSink(BaseSink):
         self.written = 0
         self.at_alarms = 0
         self._seen = 0
+        self._pipeline: Pipeline | None = None
+
+    def open(self, context: RunContext) -> None:
+        self._pipeline = context.pipeline
 
     def frame(self, fused: FusedFrame) -> None:
         self._seen += 1
@@ -50,7 +64,10 @@ class SnapshotSink(BaseSink):
         title = f"frame {fused.index}, t {fused.thermal_time_s:.2f} s, VOx {fused.vox_label}"
         title += f": ALARM {rule}" if rule else ""
         png = self.folder / f"frame_{fused.index:06d}.png"
-        write_snapshot(fused, png, png.with_suffix(".ply"), title, self.range_c)
+        pipe = self._pipeline
+        rois = pipe.rois if pipe is not None else []
+        marked = alarm_rois(pipe.alarms.rules, alarms) if pipe is not None else {}
+        write_snapshot(fused, png, png.with_suffix(".ply"), title, self.range_c, rois, marked)
         self.written += 1
         self.at_alarms += bool(alarms)
 

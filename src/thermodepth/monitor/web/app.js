@@ -33,7 +33,8 @@ function hottest(rig) {
   const h = rig.hottest;
   if (!h) return `<div class="hottest">– <small>no hotspot</small></div>`;
   const where = h.position_m.map((x) => num(x, 2)).join(", ");
-  return `<div class="hottest" data-hottest="${h.max_c}">${num(h.max_c)} °C <small>at ${num(h.distance_m, 2)} m (${where} m)${h.resolvable ? "" : ", too small: reads low"}</small></div>`;
+  const stale = rig.health === "stale" ? `, the last, ${ago(rig.last_frame_age_s)} ago` : "";
+  return `<div class="hottest${stale ? " stale" : ""}" data-hottest="${h.max_c}">${num(h.max_c)} °C <small>at ${num(h.distance_m, 2)} m (${where} m)${h.resolvable ? "" : ", too small: reads low"}${esc(stale)}</small></div>`;
 }
 
 function alarmList(rig, withButtons) {
@@ -44,17 +45,70 @@ function alarmList(rig, withButtons) {
       : withButtons ? `<button data-ack="${esc(a.rule)}">Acknowledge</button>` : ""}</li>`).join("")}</ul>`;
 }
 
-// Live pictures: the next one asked for once the last has arrived, at 2 Hz at most.
-function keepLive(img, url) {
-  let alive = true;
-  const next = () => {
-    if (!alive || !document.body.contains(img)) return;
+// how long ago, as a person says it: 12 s, 4 min, 3 h 5 min, 2 d 4 h
+const ago = (s) => {
+  if (s === null || s === undefined || !Number.isFinite(s)) return "–";
+  const m = Math.floor(s / 60), h = Math.floor(m / 60), d = Math.floor(h / 24);
+  if (s < 60) return `${Math.floor(s)} s`;
+  if (m < 60) return `${m} min`;
+  if (h < 24) return `${h} h${m % 60 ? ` ${m % 60} min` : ""}`;
+  return `${d} d${h % 24 ? ` ${h % 24} h` : ""}`;
+};
+
+// A live picture in its frame: <div class="pic"> with the <img> and a note over it.
+function picFrame(cls, alt, id = "") {
+  return `<div class="pic ${cls}"><img class="live"${id ? ` id="${id}"` : ""} alt="${esc(alt)}" hidden>
+    <div class="note"><span class="nopic">no picture yet</span></div></div>`;
+}
+
+// Live pictures, fetched (a refusal seen as such, never a broken image): the next asked for
+// once the last has arrived, at 2 Hz at most, and only while the rig's status (told by the
+// page, tell(rig)) says there can be a new one: never before its first frame, not again
+// after a refusal until its frame count has changed, once only while it is stale (its last
+// picture, dimmed and dated).
+function livePicture(box, url) {
+  const img = box.querySelector("img"), note = box.querySelector(".note");
+  let rig = null, shown = null, refusedAt = null, askedAt = null;
+  const mayAsk = () => rig && rig.frames > 0 && rig.frames !== refusedAt
+    && (rig.health !== "stale" || rig.frames !== askedAt);
+  const draw = () => {
+    const stale = rig?.health === "stale";
+    box.classList.toggle("stale", Boolean(stale && shown));
+    box.classList.toggle("empty", !shown);
+    if (!shown) {
+      const why = !rig || rig.frames > 0 ? "" : stale ? ` · no frame for ${ago(rig.last_frame_age_s)}` : " · waiting for its first frame";
+      note.innerHTML = `<span class="nopic">no picture yet${esc(why)}</span>`;
+    } else {
+      note.innerHTML = stale ? `<span class="stale-note">stale · last frame ${esc(ago(rig.last_frame_age_s))} ago</span>` : "";
+    }
+  };
+  const next = async () => {
+    if (!document.body.contains(box)) return;
     const started = Date.now();
-    img.onload = img.onerror = () => setTimeout(next, Math.max(0, 500 - (Date.now() - started)));
-    img.src = `${url}${url.includes("?") ? "&" : "?"}t=${started}`;
+    if (mayAsk()) {
+      askedAt = rig.frames;
+      try {
+        const r = await api(`${url}${url.includes("?") ? "&" : "?"}t=${started}`, { cache: "no-store" });
+        if (r.ok) {
+          const blob = await r.blob();
+          const old = shown;
+          shown = URL.createObjectURL(blob);
+          img.src = shown;
+          img.hidden = false;
+          if (old) URL.revokeObjectURL(old);
+          refusedAt = null;
+        } else {
+          refusedAt = rig.frames;
+        }
+      } catch (e) {
+        if (e.message === "login") return;
+      }
+      draw();
+    }
+    setTimeout(next, Math.max(0, 500 - (Date.now() - started)));
   };
   next();
-  return () => { alive = false; };
+  return { tell(status) { rig = status; draw(); } };
 }
 
 async function whoAmI() {
@@ -101,12 +155,13 @@ async function overview() {
         card.dataset.rig = rig.name;
         card.innerHTML = `<div class="head"><h2><a href="/rig/${encodeURIComponent(rig.name)}">${esc(rig.name)}</a></h2>
           <span class="where">${esc(rig.location || "")}</span><span class="state"></span></div>
-          <img class="live" alt="live overlay of ${esc(rig.name)}">
+          ${picFrame("wide", `live overlay of ${rig.name}`)}
           <div class="body"><div class="reading"></div><div class="scale"></div><div class="alarms-here"></div></div>`;
         grid.append(card);
         cards.set(rig.name, card);
-        keepLive(card.querySelector("img"), `/api/rigs/${encodeURIComponent(rig.name)}/overlay.jpg?width=640`);
+        card.picture = livePicture(card.querySelector(".pic"), `/api/rigs/${encodeURIComponent(rig.name)}/overlay.jpg?width=640`);
       }
+      card.picture.tell(rig);
       card.querySelector(".state").innerHTML = badge(rig.health);
       card.querySelector(".reading").innerHTML = hottest(rig);
       card.querySelector(".scale").innerHTML = legend(rig.temp_range_c);
@@ -119,27 +174,46 @@ async function overview() {
 
 // -- a rig ---------------------------------------------------------------------------------
 
-function spark(values) {
-  const v = values.filter((x) => x !== null && x !== undefined);
-  if (v.length < 2) return `<span class="muted">–</span>`;
-  const lo = Math.min(...v), hi = Math.max(...v), span = hi - lo || 1;
-  const pts = values.map((x, i) => (x === null ? null : `${(i / (values.length - 1)) * 160},${30 - ((x - lo) / span) * 28}`))
-    .filter(Boolean).join(" ");
-  return `<svg class="spark" viewBox="0 0 160 32"><polyline points="${pts}"/></svg>`;
+// A clock time (local, 24 h) of a Unix time in seconds: 14:07
+const clock = (t) => { const d = new Date(t * 1000); return `${String(d.getHours()).padStart(2, "0")}:${String(d.getMinutes()).padStart(2, "0")}`; };
+
+// A trend as a sparkline with its scale: the temperatures (°C) of its top and bottom at their
+// right (its highest and lowest values, 0.1 °C outward, the scale at least SPARK_MIN_C tall:
+// a sensor's noise is not drawn as a swing), when it begins and ends (clock times; a
+// replay's own times: how long ago) under it. points: [{time_s, value}], value null where
+// there was none.
+const SPARK_MIN_C = 1;
+function spark(points) {
+  const p = points.filter((x) => x.value !== null && x.value !== undefined && Number.isFinite(x.value));
+  if (p.length < 2) return `<span class="muted">${p.length ? `${num(p[0].value)} °C so far` : "–"}</span>`;
+  const vs = p.map((x) => x.value), mid = (Math.min(...vs) + Math.max(...vs)) / 2;
+  const lo = Math.floor(Math.min(...vs, mid - SPARK_MIN_C / 2) * 10) / 10;
+  const hi = Math.ceil(Math.max(...vs, mid + SPARK_MIN_C / 2) * 10) / 10, span = hi - lo;
+  const t0 = p[0].time_s, t1 = p.at(-1).time_s, dt = t1 - t0 || 1;
+  const W = 200, H = 40, x = (t) => ((t - t0) / dt) * W, y = (v) => H - 3 - ((v - lo) / span) * (H - 6);
+  const line = p.map((q) => `${x(q.time_s).toFixed(1)},${y(q.value).toFixed(1)}`).join(" ");
+  const unix = t0 > 1e9; // a live rig's times; a replay's run from its own start
+  return `<div class="trend" data-points="${p.length}">
+    <svg class="spark" viewBox="0 0 ${W} ${H}" preserveAspectRatio="none" role="img"
+      aria-label="from ${num(lo)} to ${num(hi)} °C over ${ago(t1 - t0)}">
+      <line class="edge" x1="0" x2="${W}" y1="3" y2="3"/><line class="edge" x1="0" x2="${W}" y1="${H - 3}" y2="${H - 3}"/>
+      <polyline points="${line}"/></svg>
+    <span class="hi">${num(hi)} °C</span><span class="lo">${num(lo)} °C</span>
+    <span class="when"><span>${unix ? clock(t0) : `−${ago(t1 - t0)}`}</span><span>${ago(t1 - t0)}</span><span>${unix ? clock(t1) : "last"}</span></span></div>`;
 }
 
 async function rigPage() {
   const name = decodeURIComponent(location.pathname.slice("/rig/".length));
   document.title = `thermodepth · ${name}`;
   main.innerHTML = `<h2>${esc(name)} <span id="state"></span> <span class="muted" id="where"></span></h2>
-    <div class="two"><div><img class="live" id="overlay" alt="live overlay"><div id="scale"></div></div>
-    <div><img class="live" id="thermal" alt="thermal image" style="aspect-ratio:4/3"><div id="reading"></div>
+    <div class="two"><div>${picFrame("wide", "live overlay", "overlay")}<div id="scale"></div></div>
+    <div>${picFrame("thermal", "thermal image", "thermal")}<div id="reading"></div>
     <h3>Alarms</h3><div id="alarms"></div></div></div>
     <h3>Regions of interest</h3><div class="scroll"><table id="rois"></table></div>
     <h3>Recent events</h3><div class="scroll"><table id="events"></table></div>`;
   const q = encodeURIComponent(name);
-  keepLive(document.getElementById("overlay"), `/api/rigs/${q}/overlay.jpg`);
-  keepLive(document.getElementById("thermal"), `/api/rigs/${q}/thermal.png`);
+  const pictures = [livePicture(document.querySelector(".pic.wide"), `/api/rigs/${q}/overlay.jpg`),
+    livePicture(document.querySelector(".pic.thermal"), `/api/rigs/${q}/thermal.png`)];
   main.addEventListener("click", (e) => {
     const rule = e.target.dataset?.ack;
     if (rule) acknowledge(name, rule);
@@ -148,6 +222,7 @@ async function rigPage() {
     const status = await json("/api/status");
     const rig = status.rigs.find((r) => r.name === name);
     if (!rig) { main.innerHTML = `<p class="error">No rig ${esc(name)}.</p>`; return; }
+    for (const p of pictures) p.tell(rig);
     document.getElementById("state").innerHTML = badge(rig.health);
     document.getElementById("where").textContent = rig.location || "";
     document.getElementById("reading").innerHTML = hottest(rig);
@@ -156,7 +231,7 @@ async function rigPage() {
     const trend = await json(`/api/rigs/${q}/trend`);
     const rows = Object.entries(rig.rois).map(([roi, s]) => `<tr data-roi="${esc(roi)}"><td>${esc(roi)}</td>
       <td>${num(s.max_c)}</td><td>${num(s.mean_c)}</td><td>${num(s.min_c)}</td>
-      <td>${spark(trend.map((t) => t.rois[roi] ?? null))}</td></tr>`).join("");
+      <td>${spark(trend.map((t) => ({ time_s: t.time_s, value: t.rois[roi] ?? null })))}</td></tr>`).join("");
     document.getElementById("rois").innerHTML = `<tr><th>ROI</th><th>max °C</th><th>mean °C</th><th>min °C</th><th>max, last hour</th></tr>${rows}`;
     const events = await json(`/api/events?rig=${q}&limit=20`);
     document.getElementById("events").innerHTML = eventRows(events);
