@@ -222,7 +222,8 @@ def test_an_roi_alarms_snapshot_outlines_its_roi(
 ) -> None:
     pipe, frame = scene
     lines: list[str] = []
-    evidence = Evidence(tmp_path, 0.0, 1.0, 10.0, lines.append, lines.append)
+    evidence = Evidence(tmp_path, 0.0, 1.0, 10.0, lines.append)
+    evidence.painter.start()  # a worker the monitor starts with the others
     with open_source("sim") as source:
         context = RunContext(source, pipe.calibration, pipe)
         event = {"event": "alarm", "rule": rule}

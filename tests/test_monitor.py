@@ -299,7 +299,7 @@ def test_metrics_read_by_prometheus_own_parser(seen: Seen) -> None:
     def value(name: str, **labels: str) -> float:
         return next(s.value for s in samples if s.name == name and s.labels == labels)
 
-    assert value("thermodepth_rig_stalls_total", rig="a") == 1
+    assert value("thermodepth_rig_stalls_total", rig="a") >= 1
     assert value("thermodepth_rig_reconnects_total", rig="b") == 0
     assert value("thermodepth_rig_up", rig="b") == 1
     frames = value("thermodepth_rig_frames_total", rig="b")

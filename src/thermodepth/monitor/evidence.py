@@ -29,10 +29,11 @@ from numcodecs import Blosc
 
 from ..figures import alarm_rois
 from ..frames import DepthFrame, FramePair, Match, Telemetry, ThermalFrame
+from ..io.pointcloud import write_ply
 from ..io.recording import RecordingWriter
 from ..pipeline import FusedFrame
 from ..sinks.base import RunContext
-from ..sinks.snapshots import write_snapshot
+from .live import encode, framed, overlay_image
 from .logs import logger
 from .storage import fresh_path, stamp
 from .workers import Worker
@@ -333,7 +334,9 @@ class Evidence:
                 scale = range_c or display_range_c(fused.temp_depth_c)
                 # written aside and renamed: a reader never gets half a file
                 png, ply = folder / ".overlay.png", folder / ".frame.ply"
-                write_snapshot(fused, png, ply, title, scale, rois, marked)
+                drawn = framed(overlay_image(fused, scale, list(rois), marked), scale, title)
+                png.write_bytes(encode(drawn, "png"))
+                write_ply(ply, *fused.points(), *scale)
                 os.replace(ply, folder / "frame.ply")
                 os.replace(png, folder / "overlay.png")
             except Exception as exc:

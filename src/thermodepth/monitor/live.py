@@ -154,6 +154,56 @@ def overlay_image(
     return img
 
 
+LEGEND_PX = 150
+"""The width of the legend beside a framed picture (:func:`framed`)."""
+TITLE_PX = 26
+
+
+def framed(img: NDArray[np.uint8], range_c: tuple[float, float], title: str) -> NDArray[np.uint8]:
+    """A picture with what it needs to be read alone (an event's snapshot, a video stream):
+    ``title`` above it, and beside it the colour scale over ``range_c`` (C) with its ticks
+    and the tints of the pixels without a temperature (:data:`~thermodepth.figures.NO_TEMPERATURE`),
+    BGR uint8, :data:`TITLE_PX` taller and :data:`LEGEND_PX` wider than ``img``."""
+    from ..figures import NO_TEMPERATURE
+
+    h, w = img.shape[:2]
+    out = np.full((h + TITLE_PX, w + LEGEND_PX, 3), 32, np.uint8)
+    out[TITLE_PX:, :w] = img
+    cv2.putText(out, title, (6, TITLE_PX - 8), FONT, FONT_SCALE, WHITE, FONT_THICK, cv2.LINE_AA)
+    lo, hi = range_c
+    bar_top, bar_h = TITLE_PX + 10, max(40, h - 160)
+    x0 = w + 12
+    temps = np.linspace(hi, lo, bar_h)[:, None].repeat(18, axis=1)
+    out[bar_top : bar_top + bar_h, x0 : x0 + 18] = _bgr(temperature_rgb(temps, range_c) / 255.0)
+    for k in range(5):
+        t = hi - k * (hi - lo) / 4
+        y = bar_top + round(k * (bar_h - 1) / 4)
+        cv2.line(out, (x0 + 18, y), (x0 + 22, y), WHITE, 1)
+        cv2.putText(out, f"{t:.0f} C", (x0 + 26, y + 5), FONT, 0.45, WHITE, 1, cv2.LINE_AA)
+    y = bar_top + bar_h + 18
+    for _, words, tint, striped in NO_TEMPERATURE:
+        swatch = np.zeros((12, 18, 3), np.uint8)
+        swatch[:] = _bgr(np.asarray(tint, np.float32))
+        if striped:
+            v, u = np.mgrid[:12, :18]
+            swatch[((u + v) // 4) % 2 == 1] = 90
+        out[y - 10 : y + 2, x0 : x0 + 18] = swatch
+        for i, line in enumerate(_wrapped(words, 14)):
+            cv2.putText(out, line, (x0 + 24, y + 14 * i), FONT, 0.38, WHITE, 1, cv2.LINE_AA)
+        y += 14 * len(_wrapped(words, 14)) + 10
+    return out
+
+
+def _wrapped(text: str, width: int) -> list[str]:
+    lines: list[str] = []
+    for word in text.split():
+        if lines and len(lines[-1]) + 1 + len(word) <= width:
+            lines[-1] += f" {word}"
+        else:
+            lines.append(word)
+    return lines
+
+
 def thermal_image(
     frame: FusedFrame, range_c: tuple[float, float], scale: int = 4
 ) -> NDArray[np.uint8]:
