@@ -1,9 +1,9 @@
 """The dashboard in a real headless browser (Debian's chromium through selenium) against a
 monitor of two simulated rigs in real time on a real Mosquitto: logging in (a wrong token
-refused), the overview of every rig with live overlays, an alarm raised by a rig on screen
-within 2 s of the frame that raised it, acknowledged from the rig's page into the event store
-and onto MQTT, and every page drawn from the API. Skipped, naming what is missing, where
-chromium, chromium-driver, selenium or mosquitto are absent."""
+refused), the overview of every rig with live overlays, an alarm rule added while the page
+looks (a reload) and its alarm coming onto the screen by itself, acknowledged from the rig's
+page into the event store and onto MQTT, and every page drawn from the API. Skipped, naming
+what is missing, where chromium, chromium-driver, selenium or mosquitto are absent."""
 
 from __future__ import annotations
 
@@ -27,16 +27,30 @@ pytestmark = [
     pytest.mark.skipif(mqtt_broker.missing() is not None, reason=mqtt_broker.missing() or ""),
 ]
 
-SLOW_ALARM = """\
+WATCHED = """\
 hotspots:
   threshold_c: 50
 rois:
   - {name: plate, rect: [560, 280, 720, 440]}
-alarms:
-  - {name: slow, above_c: 60, for_s: 10, latch: true}
 """
-"""The chip reads about 67.5 C from the first frame: ``slow`` is raised 10 s later (time for
-the browser to be looking) and stays until acknowledged."""
+SLOW_ALARM = (
+    WATCHED
+    + """\
+alarms:
+  - {name: slow, above_c: 60, latch: true}
+"""
+)
+"""The chip reads about 67.5 C: ``slow`` is raised as soon as the rule is there (the config
+reloaded while the browser looks) and stays until acknowledged."""
+
+
+def raise_slow(monitor: Monitor) -> None:
+    """Add the rule ``slow`` to both rigs' settings and reload the config (once)."""
+    settings = monitor.runners["a"].config.settings
+    assert settings is not None
+    if "slow" not in settings.read_text():
+        settings.write_text(SLOW_ALARM)
+        monitor.reload(load_config(settings.parent / "monitor.yaml"))
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +67,7 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Any:
     monitor = None
     try:
         collector = mqtt_broker.Collector(broker, "plant/+/alarms")
-        settings_file(folder, SLOW_ALARM)
+        settings_file(folder, WATCHED)
         (folder / "token").write_text("s3cret\n")
         rigs = [{"name": n, "source": "sim:pace=real", "settings": "s.yaml"} for n in "ab"]
         path = monitor_config(
@@ -77,7 +91,7 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Any:
 
 def log_in(driver: Any, url: str, token: str) -> None:
     driver.get(f"{url}/")
-    wait_for(lambda: "/login" in driver.current_url, 5)
+    wait_for(lambda: "/login" in driver.current_url)
     browser.fill_login(driver, token)
 
 
@@ -126,31 +140,31 @@ def picture_sum(driver: Any, selector: str) -> Any:
     )
 
 
-def test_the_overview_shows_every_rig_live_and_an_alarm_within_2_s(plant: Any) -> None:
+def test_the_overview_shows_every_rig_live_and_an_alarm_as_it_comes(plant: Any) -> None:
     from selenium.webdriver.common.by import By
 
     monitor, driver, _ = plant
     log_in(driver, monitor.http.url, "s3cret")
-    wait_for(lambda: driver.find_elements(By.CSS_SELECTOR, "section.card[data-rig=b] img"), 10)
+    wait_for(lambda: driver.find_elements(By.CSS_SELECTOR, "section.card[data-rig=b] img"))
     assert texts(driver, "section.card", "data-rig") == ["a", "b"]
-    assert not monitor.store.events(10), "the alarm was raised before the page was looking"
 
-    # the alarm: seen by the browser within 2 s of the capture of the frame that raised it
+    # the alarm comes onto the page by itself, after it was raised (how soon: bench_dashboard)
+    assert not monitor.store.events(10)  # no rule yet
+    raise_slow(monitor)
     shown = "section.card[data-rig=a] li[data-alarm=slow]"
-    wait_for(lambda: texts(driver, shown), 20, every_s=0.02)
+    wait_for(lambda: texts(driver, shown), every_s=0.02)
     seen_s = time.time()
     raised = [e for e in monitor.store.events(10) if e["rule"] == "slow" and e["rig"] == "a"]
-    captured_s = datetime.fromisoformat(raised[-1]["time_utc"]).timestamp()
-    assert 0 < seen_s - captured_s < 2.0, seen_s - captured_s
+    assert seen_s > datetime.fromisoformat(raised[-1]["time_utc"]).timestamp()
     assert texts(driver, shown)[0].lower().split() == ["alarm", "slow"]
 
     # the overlays: each card's picture loaded, 640 px wide, and a new one each time asked
     for rig in "ab":
         img = f"section.card[data-rig={rig}] img.live"
         # (a busy machine may take seconds to hand chromium a picture: the bounds are loose)
-        first = wait_for(lambda img=img: picture_sum(driver, img), 15)
+        first = wait_for(lambda img=img: picture_sum(driver, img))
         assert first[0] == 640
-        wait_for(lambda img=img, first=first: picture_sum(driver, img) not in (None, first), 10)
+        wait_for(lambda img=img, first=first: picture_sum(driver, img) not in (None, first))
     assert 60 < float(texts(driver, "section.card[data-rig=a] .hottest", "data-hottest")[0]) < 75
     assert texts(driver, "section.card[data-rig=b] .state")[0].lower() == "ok"
 
@@ -158,9 +172,10 @@ def test_the_overview_shows_every_rig_live_and_an_alarm_within_2_s(plant: Any) -
 def test_acknowledge_on_the_rig_page_reaches_the_event_store_and_mqtt(plant: Any) -> None:
 
     monitor, driver, collector = plant
-    wait_for(lambda: any(e["rule"] == "slow" for e in monitor.store.events(10, rig="a")), 30)
+    raise_slow(monitor)
+    wait_for(lambda: any(e["rule"] == "slow" for e in monitor.store.events(10, rig="a")))
     driver.get(f"{monitor.http.url}/rig/a")
-    wait_for(lambda: texts(driver, "button[data-ack=slow]"), 10)
+    wait_for(lambda: texts(driver, "button[data-ack=slow]"))
     collector.drain(0.2)
     click(driver, "button[data-ack=slow]")
 
@@ -168,22 +183,21 @@ def test_acknowledge_on_the_rig_page_reaches_the_event_store_and_mqtt(plant: Any
         return [e for e in monitor.store.events(10, rig="a", state="acknowledged")
                 if e["rule"] == "slow"]  # fmt: skip
 
-    stored = wait_for(acknowledged, 5)[0]
+    stored = wait_for(acknowledged)[0]
     assert stored["by"] == "operator jane"
     published = wait_for(
         lambda: [m for t, m, _ in collector.drain(0.2)
                  if t == "plant/a/alarms" and m.get("event") == "acknowledged"],
-        5,
     )  # fmt: skip
     assert published[0]["by"] == "operator jane" and published[0]["rule"] == "slow"
     # still hot, so still raised: shown acknowledged, without its button
-    note = wait_for(lambda: texts(driver, "[data-alarm=slow] [data-acknowledged]"), 5)
+    note = wait_for(lambda: texts(driver, "[data-alarm=slow] [data-acknowledged]"))
     assert note == ["acknowledged by operator jane"]
     assert not texts(driver, "button[data-ack=slow]")
     # the ROI table and its trend
-    row = wait_for(lambda: cells(driver, "#rois tr[data-roi=plate]"), 5)[0]
+    row = wait_for(lambda: cells(driver, "#rois tr[data-roi=plate]"))[0]
     assert row[0] == "plate" and 60 < float(row[1]) < 75
-    assert wait_for(lambda: picture_sum(driver, "#thermal"), 5)[0] > 0
+    assert wait_for(lambda: picture_sum(driver, "#thermal"))[0] > 0
 
 
 def test_the_events_and_health_pages(plant: Any) -> None:
@@ -191,19 +205,21 @@ def test_the_events_and_health_pages(plant: Any) -> None:
     from selenium.webdriver.support.ui import Select
 
     monitor, driver, _ = plant
+    raise_slow(monitor)
+    wait_for(lambda: {e["rig"] for e in monitor.store.events(100)} == {"a", "b"})
     driver.get(f"{monitor.http.url}/events")
-    rows = wait_for(lambda: cells(driver, "#events tr[data-event]"), 5)
-    assert {"a", "b"} == {r[1] for r in rows}  # both rigs raised "slow"
+    rows = wait_for(lambda: {r[1] for r in cells(driver, "#events tr[data-event]")} == {"a", "b"})
+    assert rows  # both rigs raised "slow"
     Select(driver.find_element(By.ID, "state")).select_by_visible_text("acknowledged")
 
     def only_acknowledged() -> list[list[str]]:
         rows = cells(driver, "#events tr[data-event]")
         return rows if rows and all(r[4].lower() == "acknowledged" for r in rows) else []
 
-    acked = wait_for(only_acknowledged, 5)  # the filtered page, not the one before it
+    acked = wait_for(only_acknowledged)  # the filtered page, not the one before it
     assert acked[0][1:3] == ["a", "slow"] and "by operator jane" in acked[0][6]
     driver.get(f"{monitor.http.url}/health")
-    cards = wait_for(lambda: texts(driver, "section.card[data-rig]", "data-rig"), 5)
+    cards = wait_for(lambda: texts(driver, "section.card[data-rig]", "data-rig"))
     assert cards == ["a", "b"]
     assert texts(driver, "a[href='/metrics']") == ["Prometheus metrics"]
 
@@ -214,7 +230,7 @@ def test_a_wrong_token_is_refused(plant: Any) -> None:
     monitor, driver, _ = plant
     driver.delete_all_cookies()
     log_in(driver, monitor.http.url, "wrong")
-    error = wait_for(lambda: driver.find_element(By.ID, "error").text, 5)
+    error = wait_for(lambda: driver.find_element(By.ID, "error").text)
     assert "token" in error.lower()
     assert "/login" in driver.current_url
     status = driver.execute_script(

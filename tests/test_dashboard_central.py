@@ -108,7 +108,7 @@ def test_what_arrives_becomes_rigs_alarms_events_and_pictures(tmp_path: Path) ->
 def test_the_dashboards_options_are_checked(tmp_path: Path) -> None:
     http = HttpConfig(listen="0.0.0.0:8090", tls_cert=tmp_path / "c.pem")
     with pytest.raises(InputError) as info:
-        run_dashboard("mqtt://127.0.0.1/plant", tmp_path, http, MqttSettings(), print)
+        run_dashboard("mqtt://127.0.0.1/plant", tmp_path, http, MqttSettings())
     assert str(info.value).splitlines() == [
         "--listen: 0.0.0.0:8090 is reachable from other machines: give --token-file (or "
         "THERMODEPTH_HTTP_TOKEN), or listen on 127.0.0.1",
@@ -162,7 +162,7 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Any:
             central, HttpConfig(listen="127.0.0.1:0", token_file=tmp_path / "token")
         )
         server.start()
-        yield monitors, server
+        yield monitors, server, broker, tmp_path
     finally:
         for m in monitors.values():
             m.stop()
@@ -174,13 +174,25 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Any:
         broker.cleanup()
 
 
+def plant_broker(plant: Any) -> mqtt_broker.Broker:
+    return plant[2]
+
+
+def server_broker(plant: Any) -> str:
+    return str(plant[2].url("plant"))
+
+
+def server_folder(plant: Any) -> Path:
+    return Path(plant[3])
+
+
 def bearer(server: HttpServer) -> httpx.Client:
     return httpx.Client(base_url=server.url, timeout=10, headers={"Authorization": "Bearer s3cret"})
 
 
 @needs_broker
 def test_two_monitors_and_one_central_dashboard_on_one_broker(plant: Any) -> None:
-    monitors, server = plant
+    monitors, server, *_ = plant
     with bearer(server) as c:
 
         def rigs() -> dict[str, Any]:
@@ -188,14 +200,14 @@ def test_two_monitors_and_one_central_dashboard_on_one_broker(plant: Any) -> Non
             ready = all(r["hottest"] and r["health"] == "ok" for r in found.values())
             return found if len(found) == 2 and ready else {}
 
-        found = wait_for(rigs, 30)  # both measuring (a busy machine may start one late)
+        found = wait_for(rigs)  # both measuring (a busy machine may start one late)
         assert sorted(found) == ["edge1/a", "edge2/b"]
         assert all(60 < r["hottest"]["max_c"] < 75 for r in found.values())
-        overlay = wait_for(lambda: ok(c.get("/api/rigs/edge1/a/overlay.jpg?width=320")), 10)
+        overlay = wait_for(lambda: ok(c.get("/api/rigs/edge1/a/overlay.jpg?width=320")))
         assert overlay.headers["content-type"] == "image/jpeg"
         img = cv2.imdecode(np.frombuffer(overlay.content, np.uint8), 1)
         assert img.shape[1] == 320
-        thermal = wait_for(lambda: ok(c.get("/api/rigs/edge2%2Fb/thermal.png")), 10)
+        thermal = wait_for(lambda: ok(c.get("/api/rigs/edge2%2Fb/thermal.png")))
         assert thermal.content.startswith(b"\x89PNG")
         assert c.get("/rig/edge2%2Fb").status_code == 200  # the rig's page, by its path
 
@@ -204,8 +216,8 @@ def test_two_monitors_and_one_central_dashboard_on_one_broker(plant: Any) -> Non
             return [e for e in c.get("/api/events?rig=edge1/a").json()
                     if e["rule"] == "latched" and e["event"] == "alarm"]  # fmt: skip
 
-        event = wait_for(raised, 15)[0]
-        wait_for(lambda: c.get(f"/api/events/{event['id']}").json()["evidence"], 5)
+        event = wait_for(raised)[0]
+        wait_for(lambda: c.get(f"/api/events/{event['id']}").json()["evidence"])
         assert c.get(f"/api/events/{event['id']}/snapshot.png").content.startswith(b"\x89PNG")
         assert c.get(f"/api/events/{event['id']}/clip.zip").status_code == 404
         ack = c.post("/api/ack", json={"rig": "edge1/a", "rule": "latched", "by": "jane"})
@@ -214,7 +226,7 @@ def test_two_monitors_and_one_central_dashboard_on_one_broker(plant: Any) -> Non
         assert [(e["rig"], e["by"]) for e in edge1 if e["event"] == "acknowledged"] == [
             ("a", "jane")
         ]
-        wait_for(lambda: c.get("/api/events?state=acknowledged").json(), 5)
+        wait_for(lambda: c.get("/api/events?state=acknowledged").json())
         refused = c.post("/api/ack", json={"rig": "edge2/b", "rule": "melt", "by": "jane"})
         assert refused.status_code == 409 and "melt" in refused.json()["error"]
         unknown = c.post("/api/ack", json={"rig": "b", "rule": "latched", "by": "j"})
@@ -226,18 +238,18 @@ def test_two_monitors_and_one_central_dashboard_on_one_broker(plant: Any) -> Non
 def test_the_central_dashboards_pages_in_a_browser(plant: Any) -> None:
     from selenium.webdriver.common.by import By
 
-    _, server = plant
+    _, server, *_ = plant
     driver = browser.chromium()
     try:
         driver.get(f"{server.url}/login")
         browser.fill_login(driver, "s3cret")
         script = "return [...document.querySelectorAll('section.card')].map((c) => c.dataset.rig)"
-        assert wait_for(lambda: driver.execute_script(script) == ["edge1/a", "edge2/b"], 10)
+        assert wait_for(lambda: driver.execute_script(script) == ["edge1/a", "edge2/b"])
         loaded = (
             "const i = document.querySelector('section.card[data-rig=\"edge2/b\"] img');"
             "return i && i.complete ? i.naturalWidth : 0"
         )
-        assert wait_for(lambda: driver.execute_script(loaded), 10) == 640
+        assert wait_for(lambda: driver.execute_script(loaded)) == 640
         driver.find_element(By.LINK_TEXT, "edge2/b").click()  # the rig's page, by its path
         wait_for(
             lambda: driver.execute_script("return document.title") == "thermodepth · edge2/b", 5
@@ -247,12 +259,76 @@ def test_the_central_dashboards_pages_in_a_browser(plant: Any) -> None:
 
 
 @needs_broker
-def test_a_stopped_monitors_rig_goes_stale(plant: Any) -> None:
-    monitors, server = plant
+def test_a_late_dashboard_lists_the_events_behind_the_alarms_it_shows(plant: Any) -> None:
+    monitors, server, *_ = plant
+    broker_url = server_broker(plant)
+    with bearer(server) as c:  # the plant's own dashboard has seen edge1's alarm raised
+        wait_for(lambda: [e for e in c.get("/api/events?rig=edge1/a").json()
+                          if e["rule"] == "latched" and e["event"] == "alarm"])  # fmt: skip
+    late = CentralDashboard(
+        broker_url, server_folder(plant) / "late", MqttSettings(client_id="late-dashboard")
+    )
+    late.start()  # started after the alarm: it learns it from what is retained
+    try:
+
+        def listed() -> list[dict[str, Any]]:
+            return [e for e in late.events(100, rig="edge1/a") if e["rule"] == "latched"]
+
+        events = wait_for(listed)
+        active = {a["rule"] for r in late.status()["rigs"] if r["name"] == "edge1/a"
+                  for a in r["active_alarms"]}  # fmt: skip
+        assert "latched" in active and events[-1]["event"] == "alarm"
+        edge1 = {e["id"] for e in monitors["edge1"].store.events(100)}
+        assert {int(e["origin"].rpartition("#")[2]) for e in events} <= edge1  # theirs, once
+    finally:
+        late.stop()
+
+
+@needs_broker
+def test_a_stopped_monitors_rig_shows_stopped_and_is_retired(plant: Any) -> None:
+    monitors, server, *_ = plant
     with bearer(server) as c:
-        wait_for(lambda: len(c.get("/api/status").json()["rigs"]) == 2, 20)
+        wait_for(lambda: len(c.get("/api/status").json()["rigs"]) == 2)
+        csrf = {"X-CSRF-Token": "unused"}  # the bearer token needs none
+        busy = c.post("/api/retire", json={"name": "edge2"}, headers=csrf)
+        assert busy.status_code == 409 and "still running: edge2/b" in busy.json()["error"]
         monitors.pop("edge2").stop()
-        stale = wait_for(lambda: c.get("/api/status").json()["monitors"]["edge2/monitor"]
-                         == "stopped" and c.get("/healthz"), 10)  # fmt: skip
-        assert stale.status_code == 503 and stale.json()["rigs"] == ["edge2/b"]
-        assert c.get("/api/status").json()["rigs"][1]["health"] == "stale"
+
+        def stopped() -> dict[str, Any] | None:
+            rigs = {r["name"]: r for r in c.get("/api/status").json()["rigs"]}
+            b = rigs.get("edge2/b")
+            return b if b and b["state"] == "stopped" else None
+
+        b = wait_for(stopped)  # at once: its monitor said so on its way out
+        assert b["up"] == 0 and b["fps"] == 0 and b["health"] == "stopped"
+        assert c.get("/healthz").status_code == 200  # stopped on purpose is not stale
+        refused = c.post("/api/ack", json={"rig": "edge2/b", "rule": "latched", "by": "jane"})
+        assert refused.status_code == 409 and "its monitor has stopped" in refused.json()["error"]
+        gone = c.post("/api/retire", json={"name": "edge2"}, headers=csrf)
+        assert gone.status_code == 200 and gone.json() == {"retired": ["edge2/b"]}
+        assert [r["name"] for r in c.get("/api/status").json()["rigs"]] == ["edge1/a"]
+        assert c.post("/api/retire", json={"name": "edge2"}).status_code == 404
+    # retired for every dashboard: nothing of edge2 is retained on the broker any more
+    retained = mqtt_broker.Collector(plant_broker(plant), "plant/edge2/#", client_id="late")
+    assert retained.drain(settle_s=1.0) == []
+    retained.close()
+
+
+@needs_broker
+def test_a_dead_monitors_rig_is_stale(plant: Any) -> None:
+    import paho.mqtt.client as mqtt
+
+    _, server, *_ = plant
+    with bearer(server) as c:
+        wait_for(lambda: any(r["name"] == "edge1/a" and r["up"]
+                             for r in c.get("/api/status").json()["rigs"]))  # fmt: skip
+        # what the broker says for a monitor killed: its last will
+        will = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="will")
+        will.username_pw_set("rig", plant_broker(plant).password)
+        will.connect("127.0.0.1", plant_broker(plant).port)
+        will.loop_start()
+        will.publish("plant/edge1/monitor/status", '{"state": "died"}', 1, True).wait_for_publish()
+        will.disconnect()
+        will.loop_stop()
+        sick = wait_for(lambda: (r := c.get("/healthz")).status_code == 503 and r.json())
+        assert sick["rigs"] == ["edge1/a"]

@@ -74,9 +74,9 @@ def rigs(tmp_path_factory: pytest.TempPathFactory) -> Any:
         # gone until it has one, so that it has a last picture when it goes
         wait_for(lambda: picture("gone", "overlay", None), GONE_S)
         driver.get(f"{monitor.http.url}/")
-        wait_for(lambda: "/login" in driver.current_url, 10)
+        wait_for(lambda: "/login" in driver.current_url)
         browser.fill_login(driver, "s3cret")
-        wait_for(lambda: driver.find_elements("css selector", "section.card[data-rig=never]"), 10)
+        wait_for(lambda: driver.find_elements("css selector", "section.card[data-rig=never]"))
         yield monitor, driver, asked, lock
     finally:
         driver.quit()
@@ -112,10 +112,10 @@ def test_a_rig_that_never_sent_a_frame_shows_no_picture_yet_and_is_not_asked(rig
     monitor, driver, asked, lock = rigs
     driver.get(f"{monitor.http.url}/")
     card = "section.card[data-rig=never] .pic"
-    seen = wait_for(lambda: (s := shown(driver, card)) and "no picture yet" in s["note"] and s, 10)
+    seen = wait_for(lambda: (s := shown(driver, card)) and "no picture yet" in s["note"] and s)
     assert not seen["displayed"], "no image shown, so no broken one"
     # the live rig's picture comes meanwhile: the page does ask for pictures
-    wait_for(lambda: shown(driver, "section.card[data-rig=live] .pic")["loaded"], 30)
+    wait_for(lambda: shown(driver, "section.card[data-rig=live] .pic")["loaded"])
     during = polls(asked, lock, 6, 60)  # the overview asks for the status every second
     assert during["never"] == 0, during
     assert during["live"] >= 3, during
@@ -144,7 +144,7 @@ def test_a_stale_rigs_last_picture_is_dimmed_dated_and_not_asked_again(rigs: Any
     # the rig's page: both of its pictures dimmed and dated
     driver.get(f"{monitor.http.url}/rig/gone")
     for box in (".pic.wide", ".pic.thermal"):
-        seen = wait_for(partial(stale, box), 15)
+        seen = wait_for(partial(stale, box))
         assert "grayscale(1)" in seen["filter"]
         assert seen["note"].startswith("stale · last frame ")
     hottest = driver.execute_script("return document.querySelector('#reading .hottest').innerText")
@@ -184,7 +184,7 @@ def test_the_roi_trend_has_its_scale(rigs: Any) -> None:
         # the page drawn from the trend as fetched here (a point comes every 10 s)
         return (got, points, values) if len(values) >= 2 and got["n"] == len(values) else None
 
-    got, points, values = wait_for(agree, 60, every_s=0.5)  # a point every 10 s
+    got, points, values = wait_for(agree, every_s=0.5)  # a point every 10 s
     lo, hi = scale(values)
     assert (got["lo"], got["hi"]) == (f"{lo:.1f} °C", f"{hi:.1f} °C")
     assert lo <= min(values) and max(values) <= hi and hi - lo > 0.999

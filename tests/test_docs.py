@@ -119,12 +119,12 @@ def run_monitor(config: Path, expected: list[str]) -> str:
             assert proc.poll() is None, f"the monitor stopped:\n{log.read_text()}"
             assert time.monotonic() < end, f"not every line of the guide came:\n{log.read_text()}"
             time.sleep(0.2)
-        with httpx.Client(base_url=url, timeout=10) as http:
+        with httpx.Client(base_url=url, timeout=60) as http:
             assert http.get("/healthz").status_code == 200  # the rig's data are fresh
             assert "app.js" in http.get("/").text  # the dashboard, open on this machine
     finally:
         proc.send_signal(signal.SIGTERM)
-        code = proc.wait(60)
+        code = proc.wait(120)
     assert code == 0, log.read_text()
     assert "monitor: stopped" in log.read_text()
     return log.read_text()

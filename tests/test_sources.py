@@ -11,10 +11,12 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
 
+from monitor_helpers import PATIENCE_S, wait_for
 from test_telemetry import telemetry_bytes, words_of
 from thermodepth.errors import FieldError, InputError, ThermodepthError
 from thermodepth.frames import (
@@ -356,19 +358,25 @@ def device_times(spec: str, pairs: Iterable[FramePair]) -> list[float]:
 
 
 def test_sim_unplug_loses_the_device_until_its_time_is_up() -> None:
-    spec = "sim:pace=real,faults=unplug@0.3s+0.4s"
+    spec = "sim:pace=real,faults=unplug@0.3s+2s"
     src = open_source(spec)
     pairs: list[FramePair] = []
-    with pytest.raises(DeviceLostError, match=r"sim: unplugged at 0.3 s \(for 0.4 s\)"):
+    with pytest.raises(DeviceLostError, match=r"sim: unplugged at 0.3 s \(for 2 s\)"):
         pairs.extend(src)
     times = device_times(spec, pairs)
     assert times and max(times) < 0.3
-    assert abs(pairs[-1].thermal_time_s - time.time()) < 0.2  # Unix time, as live cameras
+    assert abs(pairs[-1].thermal_time_s - time.time()) < 3600  # Unix time, as live cameras
     with pytest.raises(InputError, match="no simulated device"):
         open_source(spec)  # still unplugged: the device's time goes on across openings
-    time.sleep(0.45)
-    again = device_times(spec, open_source(spec, frames=2))
-    assert [t >= 0.7 for t in again] == [True, True]
+
+    def plugged_again() -> Any:
+        try:
+            return open_source(spec, frames=2)
+        except InputError:
+            return None
+
+    again = device_times(spec, wait_for(plugged_again))
+    assert [t >= 2.3 for t in again] == [True, True]
 
 
 def test_sim_stall_sends_nothing_until_closed_then_goes_on() -> None:
@@ -377,8 +385,10 @@ def test_sim_stall_sends_nothing_until_closed_then_goes_on() -> None:
     got: list[FramePair] = []
     reader = threading.Thread(target=lambda: got.extend(src))
     reader.start()
-    time.sleep(0.6)
-    assert reader.is_alive() and got and max(device_times(spec, got)) < 0.2  # stalled
+    wait_for(lambda: got)
+    device = sim_device(spec)
+    wait_for(lambda: device.now_s() > 0.6)  # three frames' time past the stall
+    assert reader.is_alive() and max(device_times(spec, got)) < 0.2  # stalled
     src.close()
     reader.join(1.0)
     assert not reader.is_alive()  # close() unblocks a stalled camera
@@ -578,7 +588,7 @@ def test_a_paired_source_recovers_through_its_thermal_camera(
 
 
 class EndlessCapture(FakeCapture):
-    """read() returns ``make(k)`` forever, one frame per 5 ms; fails the test after 3 s (a
+    """read() returns ``make(k)`` forever, one frame per 5 ms; fails the test after 60 s (a
     camera that never gives up)."""
 
     def __init__(self, make: Callable[[int], np.ndarray]) -> None:
@@ -586,7 +596,7 @@ class EndlessCapture(FakeCapture):
         self.make, self.k, self.t0 = make, 0, time.monotonic()
 
     def read(self) -> tuple[bool, np.ndarray | None]:
-        assert time.monotonic() - self.t0 < 3.0, "the camera kept reading frames it cannot use"
+        assert time.monotonic() - self.t0 < 60.0, "the camera kept reading frames it cannot use"
         time.sleep(0.005)
         self.k += 1
         return True, self.make(self.k)
@@ -714,7 +724,7 @@ class RsPipeline:
         return RsProfile(self.broken_sensor, self.ppx)
 
     def try_wait_for_frames(self, timeout_ms: int) -> tuple[bool, RsFrameset | None]:
-        assert time.monotonic() - self.t0 < 3.0, "the camera kept waiting for a new frame"
+        assert time.monotonic() - self.t0 < 60.0, "the camera kept waiting for a new frame"
         self.waiting = True
         time.sleep(self.wait_s)
         self.waiting = False
@@ -851,9 +861,9 @@ def test_realsense_close_from_another_thread_waits_for_the_read(
     cam = live_realsense(monkeypatch, pipeline, timeout_s=5.0)
     reader = threading.Thread(target=lambda: list(cam), name="reader")
     reader.start()
-    time.sleep(0.02)  # inside a wait
+    wait_for(lambda: pipeline.waiting, every_s=0.001)  # inside a wait
     cam.close()
-    reader.join(2.0)
+    reader.join(PATIENCE_S)
     assert not reader.is_alive()
     assert pipeline.stops == [reader]  # stopped once, by the reading thread ...
     assert not pipeline.stopped_during_wait  # ... after its wait returned

@@ -233,6 +233,8 @@ class CentralDashboard:
             whole = bool(of_monitor) or monitor in self.monitors
         if not rigs and not whole:
             raise AckRefusedError(404, f"no rig or monitor {name!r}")
+        if not self.connection.connected:
+            raise AckRefusedError(409, "not connected to the broker: whether it runs is not known")
         live = [r for r in rigs if r not in self.stale_rigs() and not self._stopped(r)]
         if live:
             raise AckRefusedError(409, f"still running: {', '.join(live)}")
@@ -373,6 +375,7 @@ class CentralDashboard:
                 said = self.monitors.get(monitor_of(name), "running")
                 if said != "running":  # what it last told is no longer so
                     d["state"], d["up"], d["fps"] = said, 0, 0.0
+                    d["health"] = "stale" if name in stale else said
                     d["last_frame_age_s"] = round(now - max(r.measured_s, r.heard_s), 2)
                 rigs.append(d)
             monitors = dict(sorted(self.monitors.items()))
