@@ -5,6 +5,8 @@ for a condition (helpers for tests/test_monitor*.py)."""
 from __future__ import annotations
 
 import logging
+import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -100,3 +102,35 @@ def wait_for(
         if time.monotonic() > end:
             raise AssertionError(f"not within {timeout_s} s")
         time.sleep(every_s)
+
+
+class Notifications:
+    """A datagram socket standing for systemd's notify socket, read as systemd reads it: all
+    the time, on a thread of its own (``got``: what came, in order)."""
+
+    def __init__(self, path: Path) -> None:
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.bind(str(path))
+        self.sock.settimeout(0.1)
+        self.path = path
+        self.got: list[str] = []
+        self._closed = threading.Event()
+        threading.Thread(target=self._listen, daemon=True).start()
+
+    def _listen(self) -> None:
+        while not self._closed.is_set():
+            try:
+                self.got.append(self.sock.recv(4096).decode())
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+
+    def read(self) -> list[str]:
+        return list(self.got)
+
+    def has(self, text: str) -> bool:
+        return any(text in g for g in self.read())
+
+    def close(self) -> None:
+        self._closed.set()

@@ -502,6 +502,18 @@ def test_notify_sends_datagrams_to_the_notify_socket(
     assert watchdog_interval_s() is None  # another process's watchdog
 
 
+def test_notify_never_waits_for_a_reader_that_does_not_read(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "notify"
+    with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as server:
+        server.bind(str(path))
+        monkeypatch.setenv("NOTIFY_SOCKET", str(path))
+        sent = [notify("WATCHDOG=1") for _ in range(2000)]  # far more than its queue holds
+        assert sent[0] is True and sent[-1] is False  # dropped, not waited on
+        assert server.recv(64) == b"WATCHDOG=1"
+
+
 def test_notify_reaches_an_abstract_socket(monkeypatch: pytest.MonkeyPatch) -> None:
     name = f"thermodepth-test-{os.getpid()}"
     with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as server:

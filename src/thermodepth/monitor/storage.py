@@ -69,7 +69,8 @@ class ContinuousRecorder:
             if now < self._retry_at or self.context is None:
                 return
             self._start(now)
-        assert self.recorder is not None
+            if self.recorder is None:  # not started (told): tried again after RETRY_S
+                return
         try:
             self.recorder.add(event)
         except Exception as exc:
@@ -167,10 +168,12 @@ class Retention:
         return sorted(found)
 
     def _delete(self, kind: str, path: Path) -> None:
-        shutil.rmtree(path, ignore_errors=True)
-        self.deleted[kind] += 1
+        # the events are told first: if the store cannot take it, the clip stays for the
+        # next sweep, and no event points at a clip that is gone without saying so
         if kind == CLIPS:
             self.clip_deleted(f"{path.parent.name}/{path.name}")
+        shutil.rmtree(path, ignore_errors=True)
+        self.deleted[kind] += 1
 
     def sweep(self, now_s: float | None = None) -> str | None:
         """Delete what the rule says; a line when less than ``min_free_gb`` stays free with

@@ -111,7 +111,7 @@ class EventStore:
         values = [row[k] for k in COLUMNS]
         body = json.dumps(jsonable(event))
         with self._lock:
-            self.db.execute("BEGIN IMMEDIATE")
+            self.db.execute("BEGIN IMMEDIATE")  # a full disk may refuse even this: raised
             try:
                 cur = self.db.execute(
                     f"INSERT INTO events ({', '.join(COLUMNS)}, body) "
@@ -123,7 +123,8 @@ class EventStore:
                     self.db.execute("INSERT INTO outbox (event_id) VALUES (?)", (event_id,))
                 self.db.execute("COMMIT")
             except BaseException:
-                self.db.execute("ROLLBACK")
+                if self.db.in_transaction:  # else ROLLBACK's own error would hide the cause
+                    self.db.execute("ROLLBACK")
                 raise
         return event_id
 

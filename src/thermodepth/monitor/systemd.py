@@ -24,7 +24,8 @@ def notify(*fields: str) -> bool:
     message = "\n".join(fields).encode()
     try:
         with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC) as s:
-            s.connect(address)
+            s.setblocking(False)  # a reader that does not read drops the datagram, never
+            s.connect(address)  # hangs the monitor's clock (or its stop)
             s.sendall(message)
     except OSError:
         return False

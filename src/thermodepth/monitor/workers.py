@@ -58,6 +58,9 @@ class Worker:
         self.last_beat_mono = time.monotonic()
 
     def start(self) -> None:
+        """Start its thread (once: a worker its part started early is not started again)."""
+        if self._thread is not None:
+            return
         self._thread = threading.Thread(target=self._supervise, name=self.name, daemon=True)
         self._thread.start()
 

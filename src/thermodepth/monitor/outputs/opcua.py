@@ -36,6 +36,7 @@ server's own certificate, made on first start in ``certificate_dir``).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hmac
 import logging
 import math
@@ -63,6 +64,12 @@ STATS = ("Max", "Mean", "Min")
 STATUS_EVERY_S = 1.0
 BEAT_S = 0.5
 WORKER_LIMIT_S = 30.0
+RELEASE_S = 10.0
+"""How long the end of a server's loop waits for its tasks and its stop, at most."""
+
+
+async def _none() -> None:
+    """Nothing to wait for."""
 
 
 class OpcUaOutput(Output):
@@ -121,8 +128,9 @@ class OpcUaOutput(Output):
         return rigs == self.rigs
 
     def _main(self, worker: Worker) -> None:
+        loop = asyncio.new_event_loop()
         try:
-            asyncio.run(self._serve(worker))
+            loop.run_until_complete(self._serve(worker))
         except BaseException as exc:
             if not self._ready.is_set():  # told by start()
                 self._error = exc
@@ -131,6 +139,21 @@ class OpcUaOutput(Output):
             raise
         finally:
             self.loop = None
+            self._release(loop)
+
+    def _release(self, loop: asyncio.AbstractEventLoop) -> None:
+        """However the serving ended (its loop stopped under it, say), the server stopped,
+        its port let go for the restart to bind again, and the loop closed."""
+        tasks = asyncio.all_tasks(loop)
+        for task in tasks:
+            task.cancel()
+        with contextlib.suppress(BaseException):  # bounded: a task may ignore its cancelling
+            loop.run_until_complete(asyncio.wait(tasks, timeout=RELEASE_S) if tasks else _none())
+        server, self.server = self.server, None
+        if server is not None:
+            with contextlib.suppress(BaseException):
+                loop.run_until_complete(asyncio.wait_for(server.stop(), RELEASE_S))
+        loop.close()
 
     async def _serve(self, worker: Worker) -> None:
         from asyncua import Server, ua
@@ -184,6 +207,7 @@ class OpcUaOutput(Output):
             while not worker.stopping.is_set():
                 worker.beat()
                 await asyncio.sleep(BEAT_S)
+        self.server = None  # stopped by the block's end
 
     async def _certificate(self, server: Server) -> None:
         """The server's key and self-signed certificate, made on first start."""
