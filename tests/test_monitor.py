@@ -23,7 +23,14 @@ pytest.importorskip("prometheus_client", reason="the monitor needs the monitor e
 import httpx
 from prometheus_client.parser import text_string_to_metric_families
 
-from monitor_helpers import PAPER_MODEL, log_lines, monitor_config, settings_file, wait_for
+from monitor_helpers import (
+    FLAPPING,
+    PAPER_MODEL,
+    log_lines,
+    monitor_config,
+    settings_file,
+    wait_for,
+)
 from thermodepth.monitor import Monitor, load_config
 from thermodepth.monitor.http import WEB
 from thermodepth.monitor.store import EventStore
@@ -411,3 +418,34 @@ def test_events_the_store_cannot_take_are_kept_published_and_written_later(
     at = next(i for i, line in enumerate(lines) if "events could not be written to" in line)
     assert all(json.loads(line)["rig"] in ("t", "monitor") for line in lines[at + 1 :])
     assert len(lines) > at + 1
+
+
+def test_a_reload_that_adds_a_rule_keeps_the_raised_ones(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    settings = settings_file(tmp_path)
+    path = monitor_config(
+        tmp_path, [{"name": "a", "source": "sim", "settings": settings.name}], http={"listen": None}
+    )
+    monitor = Monitor(load_config(path))
+    monitor.start()
+
+    def latched() -> list[dict[str, Any]]:
+        return [e for e in monitor.store.events(10_000, "a") if e["rule"] == "latched"]
+
+    try:
+        wait_for(lambda: [e["event"] for e in latched()] == ["alarm"])
+        monitor.acknowledge("a", "latched", "jane")
+        before = latched()
+        settings.write_text(FLAPPING + "  - {name: warm, above_c: 50, level: warning}\n")
+        monitor.reload(load_config(path))
+        runner = monitor.runners["a"]
+        wait_for(lambda: any(e["rule"] == "warm" for e in monitor.store.events(100, "a")))
+        frames = runner.status.frames
+        wait_for(lambda: runner.status.frames > frames + 5)  # the rig went on after it
+        assert latched() == before  # not raised again: no second alarm, no new clip
+        kept = next(a for a in runner.raised() if a["rule"] == "latched")
+        assert kept["acknowledged"]["by"] == "jane"
+    finally:
+        monitor.stop()
+    assert "a: started (reload); rules kept as they were: hot, latched" in caplog.messages

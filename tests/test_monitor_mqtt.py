@@ -316,3 +316,36 @@ def test_home_assistant_entities_that_leave_the_config_are_removed(
         f"homeassistant/binary_sensor/{node}/a_health/config",
     }
     assert removed() == 5
+
+
+def test_a_monitor_that_cannot_start_publishes_nothing(
+    broker: Broker, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import socket
+
+    monkeypatch.setenv(PASSWORD_ENV, broker.password)
+    got = Collector(broker, "plant/#")
+    with socket.socket() as taken:  # its HTTP port is someone else's
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        path = monitor_config(
+            tmp_path,
+            [{"name": "a", "source": "sim", "settings": settings_file(tmp_path).name}],
+            http={"listen": f"127.0.0.1:{port}"},
+            mqtt={"url": broker.url("plant"), "homeassistant": True},
+        )
+        monitor = Monitor(load_config(path))
+        with pytest.raises(InputError, match=f"http.listen: 127.0.0.1:{port}: cannot listen"):
+            monitor.start()
+    # a marker sent after it gave up: whatever it had published would have come before it
+    marker = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="marker")
+    marker.username_pw_set("rig", broker.password)
+    marker.connect("127.0.0.1", broker.port)
+    marker.loop_start()
+    marker.publish("plant/marker", "{}", qos=1).wait_for_publish(PATIENCE_S)
+    marker.disconnect()
+    marker.loop_stop()
+    received = got.until(lambda out: any(t == "plant/marker" for t, _, _ in out))
+    got.close()
+    assert [t for t, _, _ in received] == ["plant/marker"]  # no status, no alarm states

@@ -6,6 +6,7 @@ and the CLI's --check."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import socket
 import sqlite3
@@ -521,3 +522,73 @@ def test_notify_reaches_an_abstract_socket(monkeypatch: pytest.MonkeyPatch) -> N
         monkeypatch.setenv("NOTIFY_SOCKET", "@" + name)
         assert notify("WATCHDOG=1")
         assert server.recv(64) == b"WATCHDOG=1"
+
+
+# -- the log ------------------------------------------------------------------------------------
+
+
+def test_the_logs_levels_come_from_the_config_per_rig(tmp_path: Path) -> None:
+    import logging
+
+    from thermodepth.monitor import Monitor
+
+    path = monitor_config(
+        tmp_path,
+        [{"name": "a", "source": "sim"}, {"name": "b", "source": "sim"}],
+        http={"listen": None},
+        log={"level": "warning", "rigs": {"a": "debug"}},
+    )
+    from thermodepth.monitor.logs import apply_levels
+
+    Monitor(load_config(path)).store.close()  # made, not started: levels set
+    try:
+        assert logging.getLogger("thermodepth.monitor").level == logging.WARNING
+        assert logging.getLogger("thermodepth.monitor.rig.a").getEffectiveLevel() == logging.DEBUG
+        assert logging.getLogger("thermodepth.monitor.rig.b").getEffectiveLevel() == logging.WARNING
+    finally:
+        apply_levels()  # as the next monitor of this process would
+    bad = monitor_config(
+        tmp_path, [{"name": "a", "source": "sim"}], log={"level": "loud", "rigs": {"z": "info"}}
+    )
+    with pytest.raises(InputError) as info:
+        load_config(bad)
+    assert "log.level: Input should be 'debug', 'info', 'warning' or 'error'" in str(info.value)
+    monitor_config(tmp_path, [{"name": "a", "source": "sim"}], log={"rigs": {"z": "info"}})
+    with pytest.raises(InputError, match=r"log.rigs.z: no rig of that name \(a\)"):
+        load_config(tmp_path / "monitor.yaml")
+
+
+def test_a_log_line_is_one_line_stamped_or_with_the_journals_priority(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import io
+    import logging
+
+    from thermodepth.monitor.logs import install_handler, rig_logger
+
+    for journal, want in ((None, r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}\+00:00 press7: stalled$"),
+                          ("8:1234", r"^<4>press7: stalled$")):  # fmt: skip
+        if journal is None:
+            monkeypatch.delenv("JOURNAL_STREAM", raising=False)
+        else:
+            monkeypatch.setenv("JOURNAL_STREAM", journal)  # systemd sets it for its journal
+        out = io.StringIO()
+        handler = install_handler(out)
+        try:
+            rig_logger("press7").warning("%s: %s", "press7", "stalled")
+            rig_logger("press7").debug("not at info")
+        finally:
+            logging.getLogger("thermodepth.monitor").removeHandler(handler)
+        lines = out.getvalue().splitlines()
+        assert len(lines) == 1 and re.match(want, lines[0]), lines
+    out = io.StringIO()
+    handler = install_handler(out)
+    try:
+        try:
+            raise ValueError("boom")
+        except ValueError:
+            logging.getLogger("thermodepth.monitor.workers").error("clock failed", exc_info=True)
+    finally:
+        logging.getLogger("thermodepth.monitor").removeHandler(handler)
+    assert out.getvalue().splitlines()[0].endswith("<3>clock failed")
+    assert "ValueError: boom" in out.getvalue()  # its traceback on the lines after

@@ -80,6 +80,7 @@ class MqttOutput(Output):
         self._last_status = float("-inf")
         self._told: dict[str, tuple[str, str]] = {}  # each rig's state and health, as published
         self._recent: dict[str, deque[dict[str, Any]]] = {}
+        self._announced = False
 
     def topic(self, rig: str, leaf: str) -> str:
         return f"{self.target.prefix}/{rig}/{leaf}"
@@ -97,6 +98,7 @@ class MqttOutput(Output):
 
     def announce(self, raised: dict[str, set[str]]) -> None:
         """The monitor runs: say so, tell every rig's alarm states, publish discovery."""
+        self._announced = True
         self._status(MONITOR, {"state": "running", "rigs": self.rigs, "since_utc": utc_now()})
         for rig in self.entities:
             self._alarm_states(rig, raised.get(rig.name, set()))
@@ -241,8 +243,10 @@ class MqttOutput(Output):
         }
 
     def stop(self, reason: str = "stopped") -> None:
+        """Say how the monitor stopped (only if it had said it runs) and disconnect."""
         self._wake.set()
-        self._status(MONITOR, {"state": reason, "until_utc": utc_now()})
+        if self._announced:
+            self._status(MONITOR, {"state": reason, "until_utc": utc_now()})
         self.connection.close(wait_s=5.0)
 
 
