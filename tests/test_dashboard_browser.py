@@ -173,14 +173,14 @@ def test_acknowledge_on_the_rig_page_reaches_the_event_store_and_mqtt(plant: Any
 
     monitor, driver, collector = plant
     raise_slow(monitor)
-    wait_for(lambda: any(e["rule"] == "slow" for e in monitor.store.events(10, rig="a")))
+    wait_for(lambda: any(e["rule"] == "slow" for e in monitor.store.events(10_000, rig="a")))
     driver.get(f"{monitor.http.url}/rig/a")
     wait_for(lambda: texts(driver, "button[data-ack=slow]"))
     collector.drain(0.2)
     click(driver, "button[data-ack=slow]")
 
     def acknowledged() -> Any:
-        return [e for e in monitor.store.events(10, rig="a", state="acknowledged")
+        return [e for e in monitor.store.events(10_000, rig="a", state="acknowledged")
                 if e["rule"] == "slow"]  # fmt: skip
 
     stored = wait_for(acknowledged)[0]
@@ -222,6 +222,11 @@ def test_the_events_and_health_pages(plant: Any) -> None:
     cards = wait_for(lambda: texts(driver, "section.card[data-rig]", "data-rig"))
     assert cards == ["a", "b"]
     assert texts(driver, "a[href='/metrics']") == ["Prometheus metrics"]
+    workers = set(wait_for(lambda: texts(driver, "#workers tr[data-worker]", "data-worker")))
+    assert workers == {"clock", "storage", "evidence pictures", "http", "mqtt outbox",
+                       "mqtt snapshots"}  # fmt: skip
+    assert not texts(driver, "#workers tr.unwell")
+    assert "connected true" in texts(driver, "#outputs")[0]
 
 
 def test_a_wrong_token_is_refused(plant: Any) -> None:

@@ -102,6 +102,19 @@ def test_what_arrives_becomes_rigs_alarms_events_and_pictures(tmp_path: Path) ->
     with pytest.raises(AckRefusedError) as info:
         central.acknowledge("edge9/z", "hot", "jane")
     assert info.value.status == 404
+    # a rig's recent list may come before the live copy of an event in it: listed at once,
+    # and the live copy still raises it and gives it its snapshot
+    later = {**raised, "id": 44, "event": "alarm"}
+    say("edge1/a/events/recent", [later])
+    assert central.events()[0]["origin"] == "edge1/a#44"
+    assert central.status()["rigs"][0]["active_alarms"] == []  # not live: the status says
+    say("edge1/a/alarms", later)
+    assert central.status()["rigs"][0]["active_alarms"] == [{"rule": "hot", "level": "alarm"}]
+    assert central.evidence_of(central.events()[0]) == ["snapshot.png"]
+    assert [e["id"] for e in central.events()].count(central.events()[0]["id"]) == 1  # once
+    # a retired rig (its status emptied on the broker) goes from every page
+    say("edge1/a/status", b"")
+    assert central.status()["rigs"] == []
     central.store.close()
 
 

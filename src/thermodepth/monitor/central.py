@@ -61,6 +61,8 @@ from .supervisor import AckRefusedError
 
 SILENT_S = 2.5 * STATUS_EVERY_S
 ACK_WAIT_S = 5.0
+QUIET_KEPT = 10_000
+"""Events known only from the retained recent lists, remembered for their live copy."""
 EVENT_WINS_S = 2.0  # an event newer than this outranks a status published before it
 RECENT = "events/recent"
 LEAVES = ("status", "measurements", "alarms", RECENT, "ack/result",
@@ -128,6 +130,7 @@ class CentralDashboard:
         self.acks_sent = 0
         self._lock = threading.Lock()
         self._answers: dict[str, queue.Queue[dict[str, Any]]] = {}
+        self._quiet: dict[str, int] = {}  # events known from a recent list only: their ids
         self._ack_locks: dict[str, threading.Lock] = {}
         will = (f"{self.prefix}/dashboard/status", json.dumps({"state": "died"}))
         client_id = settings.client_id or f"{default_client_id()}-dashboard"
@@ -290,12 +293,20 @@ class CentralDashboard:
         copy.setdefault("time_utc", datetime.now(timezone.utc).isoformat())
         try:
             event_id = self.store.add(copy)
-        except sqlite3.IntegrityError:
-            return  # had it already (delivered again)
-        with self._lock:
-            self.event_counts[rig, kind] += 1
-            if not live:
+        except sqlite3.IntegrityError:  # had it already: delivered again, or first from the
+            with self._lock:  # recent list (then this live copy still does what it does)
+                event_id = self._quiet.pop(copy["origin"], -1)
+            if not live or event_id < 0:
                 return
+        else:
+            with self._lock:
+                self.event_counts[rig, kind] += 1
+                if not live:
+                    self._quiet[copy["origin"]] = event_id
+                    while len(self._quiet) > QUIET_KEPT:
+                        self._quiet.pop(next(iter(self._quiet)))
+                    return
+        with self._lock:
             r.changed_s[rule] = time.monotonic()
             if kind in RAISED:
                 r.active[rule] = {"rule": rule, "level": copy["level"]}
@@ -380,6 +391,13 @@ class CentralDashboard:
                 rigs.append(d)
             monitors = dict(sorted(self.monitors.items()))
             counts = dict(self.event_counts)
+        mqtt = {
+            "broker": self.target.where,
+            "prefix": self.prefix,
+            "connected": self.connection.connected,
+            "sent": self.acks_sent,
+            "unacknowledged": self.connection.pending,
+        }
         return {
             "version": __version__,
             "started_utc": self.started_utc,
@@ -396,12 +414,9 @@ class CentralDashboard:
                 "deleted": {"continuous": 0, "clips": 0},
                 "fault": False,
             },
-            "mqtt": {
-                "broker": self.target.where,
-                "prefix": self.prefix,
-                "sent": self.acks_sent,
-                "unacknowledged": self.connection.pending,
-            },
+            "mqtt": mqtt,
+            "outputs": {"mqtt": mqtt},
+            "workers": [],
             "event_counts": counts_by_rig(counts),
             "latency_s": {},
         }

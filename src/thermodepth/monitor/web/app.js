@@ -311,7 +311,13 @@ async function healthPage() {
       ${row("storage fault", st.fault ? "raised" : "no")}</table>
       <h3>Latency, capture to alarm</h3><table>${Object.entries(s.latency_s).map(([k, v]) =>
         row(k.replace("_", " "), v.n ? `${num(v.median * 1e3, 1)} ms median, ${num(v.p99 * 1e3, 1)} ms p99 (${v.n})` : "–")).join("")}</table>
-      <h3>MQTT</h3><p>${s.mqtt ? esc(`${s.mqtt.broker}/${s.mqtt.prefix}: ${s.mqtt.sent} sent, ${s.mqtt.unacknowledged} waiting`) : "none"}</p>`;
+      <h3>Workers</h3><table id="workers"><tr><th>worker</th><th>state</th><th>restarts</th><th>last error</th></tr>
+      ${(s.workers || []).map((w) => `<tr data-worker="${esc(w.name)}" class="${w.healthy ? "" : "unwell"}"><td>${esc(w.name)}</td>
+        <td>${esc(w.state)}${w.down_s ? esc(`, down ${num(w.down_s, 1)} s`) : ""}</td><td>${w.restarts}</td>
+        <td>${esc(w.last_error || "–")}</td></tr>`).join("")}</table>
+      <h3>Outputs</h3>${Object.keys(s.outputs || {}).length ? `<table id="outputs">${Object.entries(s.outputs).map(([name, o]) =>
+        row(name, Object.entries(o).map(([k, v]) => `${k.replace(/_/g, " ")} ${v}`).join(", "))).join("")}</table>`
+        : "<p>none (the dashboard and the log only)</p>"}`;
   };
   await draw();
   setInterval(draw, 2000);
