@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from thermodepth.board import BoardSpec
 from thermodepth.camera import RigidTransform
+from thermodepth.frames import Match
 from thermodepth.sim import Rig, camera_pose, plate_scene
 from thermodepth.sim.protocols import (
     ProtocolConfig,
@@ -60,14 +61,19 @@ def _store(path: Path, prefix: str) -> Outputs:
 
 
 def _images(paths: Iterator[Path], prefix: str) -> Outputs:
-    return {f"{prefix}/{p.name}": cv2.imread(str(p), cv2.IMREAD_UNCHANGED) for p in paths}
+    out: Outputs = {}
+    for p in paths:
+        image = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        assert image is not None, p
+        out[f"{prefix}/{p.name}"] = image
+    return out
 
 
 def _renders(name: str, rig: Rig) -> Outputs:
     """A rig's noise-free renders at its pose: the thermal aperture radiance, the depth
     camera's hits and IR albedo."""
     views = rig._depth_views(rig.pose)
-    out = {f"{name}/aperture": rig.aperture}
+    out: Outputs = {f"{name}/aperture": rig.aperture}
     for field in ("z_m", "rect", "s_m", "q_m", "range_m"):
         out[f"{name}/hits_{field}"] = getattr(views.hits, field)
     out[f"{name}/shadow"] = views.shadow
@@ -121,6 +127,7 @@ def record(full: bool) -> Outputs:
     for name, cam, ir in (("source", None, False), ("source-boson320-ir", "boson320", True)):
         src = open_source("sim", frames=12, thermal_camera=cam, with_ir=ir)
         for k, ev in enumerate(src.events()):
+            assert isinstance(ev, Match)
             pair = ev.pair
             out[f"{name}/{k}/depth"] = pair.depth
             out[f"{name}/{k}/thermal"] = pair.thermal
