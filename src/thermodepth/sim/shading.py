@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Protocol
 
 import cv2
@@ -23,16 +24,11 @@ from numpy.typing import NDArray
 from ..camera import Intrinsics, RigidTransform, pixel_rays
 from ..radiometry import FLIR_ATMOSPHERE, fresnel_index, water_vapour
 from . import kernels
+from .lepton import RadianceTable
 from .raycast import Hits, grid_params, rect_params
 from .scene import Checkerboard, CircleGrid, Material, Scene
 
 FloatArray = NDArray[np.float64]
-
-
-class RadianceLookup(Protocol):
-    """Band radiance of temperatures (:class:`~.lepton.RadianceTable`)."""
-
-    def to_radiance(self, temp_k: FloatArray | float) -> FloatArray: ...
 
 
 class SurfaceHits(Protocol):
@@ -155,12 +151,13 @@ def near_ir_albedo(scene: Scene, hits: SurfaceHits) -> FloatArray:
     return table.values("ir_albedo", 0.0)[table.rows_of(hits)]
 
 
-def _thermal_args(
-    scene: Scene, table: RadianceLookup, eye_m: FloatArray | None
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, bool]:
-    """The thermal shading kernels' arguments after the surface table's: the material
-    table, the rects' geometry, their world-frame parameters, the air and the eye, and
-    whether mirrors reflect what they face (rays from an eye, a scene with mirrors)."""
+@lru_cache(maxsize=8)
+def _thermal_tables(
+    scene: Scene, table: RadianceTable
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """What the thermal shading kernels take of a scene whatever the eye: the material
+    table, the rects' geometry (but the first column), their world-frame parameters and the
+    air (but the eye)."""
     surfaces = SurfaceTable.of(scene)
     mat = np.zeros((len(surfaces.materials), 5))
     temps = surfaces.values("temp_k", scene.ambient_temp_k)
@@ -171,10 +168,7 @@ def _thermal_args(
     mat[:, kernels.DIRECTIONAL] = surfaces.values("directional", 0.0)
     mat[:, kernels.SPECULAR] = surfaces.values("specular", 0.0)
     g = scene.geometry
-    eye = np.zeros(3) if eye_m is None else np.asarray(eye_m, np.float64)
     geo = np.zeros((len(scene.rects), 13))
-    if eye_m is not None:  # the distance of each rect's plane from the eye
-        geo[:, 0] = np.abs(np.einsum("ij,ij->i", g.normal, g.center_m - eye))
     geo[:, 1:4], geo[:, 4:7], geo[:, 7:10], geo[:, 10:13] = (
         g.center_m,
         g.axis_u,
@@ -185,22 +179,29 @@ def _thermal_args(
     c = FLIR_ATMOSPHERE  # radiometry.atmospheric_transmission's terms, for one air
     sh = np.sqrt(water_vapour(scene.ambient_temp_k, scene.relative_humidity))
     l_amb = float(table.to_radiance(scene.ambient_temp_k))
-    env = np.array(
-        [
-            l_amb,
-            -(c.alpha1 + c.beta1 * sh),
-            -(c.alpha2 + c.beta2 * sh),
-            c.x,
-            1 - c.x,
-            *eye,
-        ]
-    )
-    bounce = eye_m is not None and bool(np.any(mat[:, kernels.SPECULAR] > 0))
-    return mat, geo, world, env, bounce
+    air = np.array([l_amb, -(c.alpha1 + c.beta1 * sh), -(c.alpha2 + c.beta2 * sh), c.x, 1 - c.x])
+    return mat, geo, world, air
+
+
+def _thermal_args(
+    scene: Scene, table: RadianceTable, eye_m: FloatArray | None
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, bool]:
+    """The thermal shading kernels' arguments after the surface table's: the material
+    table, the rects' geometry, their world-frame parameters, the air and the eye, and
+    whether mirrors reflect what they face (rays from an eye, a scene with mirrors)."""
+    mat, geo, world, air = _thermal_tables(scene, table)
+    if eye_m is None:
+        return mat, geo, world, np.concatenate([air, np.zeros(3)]), False
+    eye = np.asarray(eye_m, np.float64)
+    g = scene.geometry
+    geo = geo.copy()  # the distance of each rect's plane from the eye
+    geo[:, 0] = np.abs(np.einsum("ij,ij->i", g.normal, g.center_m - eye))
+    bounce = bool(np.any(mat[:, kernels.SPECULAR] > 0))
+    return mat, geo, world, np.concatenate([air, eye]), bounce
 
 
 def aperture_radiance(
-    scene: Scene, hits: Hits, table: RadianceLookup, eye_m: FloatArray | None = None
+    scene: Scene, hits: Hits, table: RadianceTable, eye_m: FloatArray | None = None
 ) -> FloatArray:
     """In-band radiance (W m^-2 sr^-1) reaching the lens along each ray of ``hits``.
 
@@ -261,7 +262,7 @@ def render_aperture(
     intr: Intrinsics,
     supersample: int,
     psf_sigma_px: float,
-    table: RadianceLookup,
+    table: RadianceTable,
 ) -> FloatArray:
     """The aperture radiance a thermal camera sees, (h, w) W m^-2 sr^-1: each pixel the mean
     of its supersample x supersample sub-rays' :func:`aperture_radiance` (the camera's
