@@ -10,7 +10,7 @@ The shading helpers give, bit for bit, what the numpy expressions they stand for
 (:func:`~thermodepth.radiometry.fresnel_emissivity`,
 :func:`~thermodepth.radiometry.atmospheric_transmission`, numpy's pairwise mean, einsum's
 dot products): the same operations in the same order, no fused multiply-adds (numba does not
-contract without ``fastmath``). tests/test_sim.py holds them to it.
+contract without ``fastmath``). tests/test_shading.py holds them to it.
 
 The work is done a batch of rays at a time (a row of a grid, a chunk of a list): a helper
 that takes arrays costs two atomic reference counts per array per call, which per ray would
@@ -33,8 +33,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-# pattern kinds (column 0 of a scene's pattern table)
-NO_PATTERN, CHECKERBOARD, CIRCLE_GRID = 0.0, 1.0, 2.0
+# pattern kinds (column 0 of a scene's pattern table; 0: none)
+CHECKERBOARD, CIRCLE_GRID = 1.0, 2.0
 
 # columns of the thermal material table
 L_OBJ, EMISSIVITY, INDEX_SQUARED, DIRECTIONAL, SPECULAR = range(5)
