@@ -31,7 +31,7 @@ from thermodepth.sim import (
     steps_fpa,
     wall_scene,
 )
-from thermodepth.sim.d435 import depth_sigma_m
+from thermodepth.sim.d435 import depth_sigma_m, ir_image
 from thermodepth.sim.lepton import (
     LeptonSensor,
     counts_from_radiance,
@@ -340,3 +340,21 @@ def test_written_frames_carry_their_truth(tmp_path: Path) -> None:
             )
             assert z["visible_in_thermal"].sum() == truth.visible_in_thermal.sum() > 0
     assert cal.thermal == rig.calibration.thermal
+
+
+@pytest.mark.parametrize(
+    "model", [DepthCameraModel(), DepthCameraModel(noise=False), DepthCameraModel(ir_noise_dn=80.0)]
+)
+def test_the_ir_image_rounds_and_clips_its_albedo_as_numpy_does(model: DepthCameraModel) -> None:
+    # rint(albedo gain + noise sigma) clipped to 0..255, bit for bit numpy's array expression:
+    # halves round to even, out-of-range values clip
+    albedo = np.random.default_rng(1).uniform(-0.2, 1.3, (72, 128))
+    albedo[0, :40] = (np.arange(40) + 0.5) / model.ir_gain  # exact halves
+    expected = albedo * model.ir_gain
+    rng = np.random.default_rng(5)
+    if model.noise:
+        expected = expected + rng.standard_normal(albedo.shape) * model.ir_noise_dn
+    expected = np.clip(np.rint(expected), 0, 255).astype(np.uint8)
+    got = ir_image(albedo, model, np.random.default_rng(5))
+    np.testing.assert_array_equal(got, expected)
+    assert got.min() == 0 and got.max() == 255

@@ -22,14 +22,10 @@ from thermodepth.radiometry import (
     fresnel_index,
 )
 from thermodepth.sim import Material, Rect, Rig, Scene, box, camera_pose, plate_scene
-from thermodepth.sim.lepton import (
-    aperture_radiance,
-    bolometer_memory,
-    radiance_table,
-    surface_properties,
-)
+from thermodepth.sim.lepton import bolometer_memory, radiance_table
 from thermodepth.sim.raycast import cast
 from thermodepth.sim.scene import RectArrays, occlusion_scene
+from thermodepth.sim.shading import aperture_radiance, surface_properties
 from thermodepth.sim.walk_truth import nearest_rect, read_walk_truth, surface_samples
 from thermodepth.sim.walkaround import (
     WalkConfig,

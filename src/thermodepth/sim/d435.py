@@ -121,12 +121,25 @@ def depth_units(
     return out
 
 
+@numba.njit(parallel=True, cache=True)
+def _to_dn(albedo, gain, noise, noise_dn, out):  # pragma: no cover - JIT
+    # rint(albedo gain + noise noise_dn) clipped to 0..255, as numpy's whole-array passes
+    h, w = albedo.shape
+    for r in numba.prange(h):
+        for c in range(w):
+            pix = albedo[r, c] * gain
+            if noise.shape[0]:
+                pix = pix + noise[r, c] * noise_dn
+            out[r, c] = min(max(np.rint(pix), 0.0), 255.0)
+
+
 def ir_image(
     albedo: FloatArray, model: DepthCameraModel, rng: np.random.Generator
 ) -> NDArray[np.uint8]:
     """8-bit infrared image from each pixel's near-IR albedo (H, W) (the mean over its
     sub-rays; emitter off, even illumination), with read noise."""
-    pix = albedo * model.ir_gain
-    if model.noise:
-        pix = pix + rng.standard_normal(pix.shape) * model.ir_noise_dn
-    return np.clip(np.rint(pix), 0, 255).astype(np.uint8)
+    albedo = np.ascontiguousarray(albedo, np.float64)
+    noise = rng.standard_normal(albedo.shape) if model.noise else np.empty((0, 0))
+    out = np.empty(albedo.shape, np.uint8)
+    _to_dn(albedo, float(model.ir_gain), noise, float(model.ir_noise_dn), out)
+    return out

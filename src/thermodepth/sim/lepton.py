@@ -4,8 +4,10 @@
 Chain, per frame (docs/simulator.md has every equation, default and source):
 
 1. Aperture radiance of each sub-pixel ray (band radiance, 8-14 um), through the air path of
-   its true range: L_ap = tau(r) [eps L(T) + (1 - eps) L(T_amb)] + (1 - tau(r)) L(T_air).
-2. Pixel footprint (mean of supersample x supersample rays) and optics blur (Gaussian PSF).
+   its true range: L_ap = tau(r) [eps L(T) + (1 - eps) L(T_amb)] + (1 - tau(r)) L(T_air)
+   (:mod:`.shading`).
+2. Pixel footprint (mean of supersample x supersample rays) and optics blur (Gaussian PSF)
+   (:func:`.shading.render_aperture`).
 3. The VOx focal-plane effect the paper compensates: residual responsivity
    g(T_fpa) = (T_ref / T_fpa)^2 (1 + c (T_fpa - T_ref)) (VOx TCR ~ 1/T^2 under a linear gain
    compensation) and interior emission the camera over-subtracts,
@@ -21,9 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
-from typing import Protocol
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -35,14 +35,10 @@ from ..radiometry import (
     PlanckConstants,
     SpectralResponse,
     ThermalOutput,
-    atmospheric_transmission,
     band_radiance,
     counts_from_kelvin,
-    fresnel_emissivity,
     kelvin_from_counts,
 )
-from .raycast import Hits, cast_rays
-from .scene import Scene
 
 FloatArray = NDArray[np.float64]
 
@@ -163,135 +159,6 @@ def radiance_table(response: SpectralResponse = LWIR_8_14) -> RadianceTable:
     return RadianceTable(t, band_radiance(t, response))
 
 
-class SurfaceHits(Protocol):
-    """Where rays meet the scene: rect index (-1 = nothing) and local (s, q) on it, (...)
-    arrays (a camera's :class:`~.raycast.Hits`, or arbitrary rays'
-    :class:`~.raycast.RayHits`)."""
-
-    @property
-    def rect(self) -> NDArray[np.int64]: ...
-    @property
-    def s_m(self) -> FloatArray: ...
-    @property
-    def q_m(self) -> FloatArray: ...
-
-
-def aperture_radiance(
-    scene: Scene, hits: Hits, table: RadianceTable, eye_m: FloatArray | None = None
-) -> FloatArray:
-    """In-band radiance (W m^-2 sr^-1) reaching the lens along each ray of ``hits``.
-
-    L_ap = tau(r) [eps L(T) + (1 - eps) L_r] + (1 - tau(r)) L(T_amb); rays that hit nothing
-    see the enclosure at the ambient temperature. L_r, the radiance the surface reflects, is
-    the ambient's L(T_amb), unless its material is specular: then the radiance its mirrored
-    ray meets, one bounce (the surface there at its temperature and emissivity, reflecting
-    the ambient, through the air between; the ambient if it meets nothing). eps is the
-    material's, or for a directional one its Fresnel emissivity at the angle of view
-    (:func:`~thermodepth.radiometry.fresnel_emissivity`). ``eye_m`` (3,): the camera's
-    centre in the world, needed when the scene has directional or specular materials.
-    """
-    if scene.has_optics and eye_m is None:
-        raise ValueError("a scene with directional or specular materials needs the eye_m")
-    return _radiance(scene, hits, hits.range_m, table, eye_m=eye_m)
-
-
-def _radiance(
-    scene: Scene,
-    hits: SurfaceHits,
-    range_m: FloatArray,
-    table: RadianceTable,
-    eye_m: FloatArray | None = None,
-    directions: FloatArray | None = None,
-) -> FloatArray:
-    """In-band radiance along rays that meet the scene at ``hits`` after ``range_m`` of air:
-    rays from the eye ``eye_m`` (3,), whose specular surfaces reflect what their mirrored
-    rays meet, or rays of unit ``directions`` (..., 3) (mirrored ones: what they meet
-    reflects the ambient)."""
-    temp = _per_ray(scene, hits, "temp_k", scene.ambient_temp_k)
-    emis = _per_ray(scene, hits, "emissivity", 1.0)
-    l_amb = float(table.to_radiance(scene.ambient_temp_k))
-    l_obj = table.to_radiance(temp)
-    l_refl = np.full(emis.shape, l_amb)
-    if scene.has_optics:
-        _view_optics(scene, hits, range_m, table, emis, l_refl, eye_m, directions)
-    tau = atmospheric_transmission(
-        np.where(hits.rect >= 0, range_m, 0.0), scene.ambient_temp_k, scene.relative_humidity
-    )
-    return tau * (emis * l_obj + (1.0 - emis) * l_refl) + (1.0 - tau) * l_amb
-
-
-def _view_optics(
-    scene: Scene,
-    hits: SurfaceHits,
-    range_m: FloatArray,
-    table: RadianceTable,
-    emis: FloatArray,
-    l_refl: FloatArray,
-    eye_m: FloatArray | None,
-    directions: FloatArray | None,
-) -> None:
-    """Set, in place, the emissivity of rays that meet a directional material to its
-    Fresnel value at the angle of view, and, for rays from the eye, the reflected radiance
-    of those that meet a specular one to what the mirrored ray meets (one bounce)."""
-    g = scene.geometry
-    rect, dist = hits.rect.ravel(), range_m.ravel()
-    turn = np.flatnonzero(_per_ray(scene, hits, "directional", 0.0).ravel() > 0)
-    if eye_m is not None:
-        # a ray from the eye meets a plane D from the eye at cos(theta) = D / range
-        plane_m = np.abs(np.einsum("ij,ij->i", g.normal, g.center_m - eye_m))
-        cos = plane_m[rect[turn]] / dist[turn]
-    else:
-        assert directions is not None
-        cos = np.einsum("ij,ij->i", directions.reshape(-1, 3)[turn], g.normal[rect[turn]])
-    emis.ravel()[turn] = fresnel_emissivity(cos, emis.ravel()[turn])
-    mirror = np.flatnonzero(_per_ray(scene, hits, "specular", 0.0).ravel() > 0)
-    if eye_m is None or not mirror.size:
-        return
-    on = rect[mirror]
-    points = g.points_m(on, hits.s_m.ravel()[mirror], hits.q_m.ravel()[mirror])
-    view = points - eye_m
-    view /= np.linalg.norm(view, axis=1, keepdims=True)
-    normal = g.normal[on]
-    out = view - 2.0 * np.einsum("ij,ij->i", view, normal)[:, None] * normal
-    seen = cast_rays(scene, points, out, skip=on)  # never meets the mirror again
-    l_refl.ravel()[mirror] = _radiance(scene, seen, seen.t, table, directions=out)
-
-
-def surface_properties(
-    scene: Scene, hits: SurfaceHits
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Temperature (K), emissivity and near-IR albedo along each ray (pattern-aware).
-
-    Rays that hit nothing get the ambient temperature, emissivity 1 and albedo 0.
-    """
-    return (
-        _per_ray(scene, hits, "temp_k", scene.ambient_temp_k),
-        _per_ray(scene, hits, "emissivity", 1.0),
-        _per_ray(scene, hits, "ir_albedo", 0.0),
-    )
-
-
-def near_ir_albedo(scene: Scene, hits: Hits) -> FloatArray:
-    """The near-IR albedo along each ray (what the depth camera's IR image needs; 0 where
-    nothing is hit): :func:`surface_properties`' third, alone."""
-    return _per_ray(scene, hits, "ir_albedo", 0.0)
-
-
-def _per_ray(scene: Scene, hits: SurfaceHits, name: str, missed: float) -> FloatArray:
-    """One material property ``name`` (a :class:`Material` field) per ray, ``missed`` where
-    nothing is hit, the second material's where a rect's pattern puts it."""
-    n = len(scene.rects)
-    values = [float(getattr(r.material, name)) for r in scene.rects]
-    out = np.asarray([*values, missed])[np.where(hits.rect >= 0, hits.rect, n)]
-    for i, rect in enumerate(scene.rects):
-        if rect.pattern is None or rect.material_b is None:
-            continue
-        on = np.flatnonzero(hits.rect.ravel() == i)
-        second = rect.pattern.second_material(hits.s_m.ravel()[on], hits.q_m.ravel()[on])
-        out.ravel()[on[second]] = float(getattr(rect.material_b, name))
-    return out
-
-
 def bolometer_memory(time_constant_s: float, renders: int = 4) -> tuple[FloatArray, FloatArray]:
     """Lags (s, (renders,)) before a frame's time and weights ((renders,), sum 1) that stand
     for a microbolometer's memory of the scene in a few renders.
@@ -311,17 +178,6 @@ def bolometer_memory(time_constant_s: float, renders: int = 4) -> tuple[FloatArr
     weights[-1] = np.exp(-(renders - 1.0))
     lags[-1] = renders * time_constant_s
     return lags, weights
-
-
-def footprint_and_blur(
-    sub_radiance: FloatArray, supersample: int, psf_sigma_px: float
-) -> FloatArray:
-    """Mean over each pixel's sub-rays, then the optics' Gaussian PSF (sigma in pixels)."""
-    h, w = sub_radiance.shape[0] // supersample, sub_radiance.shape[1] // supersample
-    pix = sub_radiance.reshape(h, supersample, w, supersample).mean(axis=(1, 3))
-    if psf_sigma_px > 0:
-        pix = cv2.GaussianBlur(pix, (0, 0), psf_sigma_px, borderType=cv2.BORDER_REFLECT)
-    return pix
 
 
 def measured_radiance(

@@ -1,133 +1,32 @@
 """Ray casting of rect scenes for a pinhole camera with distortion, and of arbitrary rays
-(numba kernels).
+(numba kernels of :mod:`.kernels`).
 
 A camera's rays are given as a grid of undistorted normalised coordinates (x, y): the ray
 through a (sub)pixel is d = (x, y, 1) in the camera frame, so the hit parameter t is the depth
-Z along the optical axis and the range is t |d|. Each rect is tested only inside the
-(sub)pixel bounding box of its projected outline; the nearest hit wins (z-buffer).
+Z along the optical axis and the range is t |d|. Each rect is tested only on the rows and
+columns of the grid whose rays reach into the bounds of its view (of the part of it in front
+of the camera); the nearest hit wins (z-buffer).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Intrinsics, RigidTransform, pixel_rays
+from ..camera import Intrinsics, RigidTransform, corner_rays, pixel_rays
+from . import kernels
 from .scene import Scene
 
 FloatArray = NDArray[np.float64]
 
-# per-rect row: n (3), n.c, u (3), u.c, v (3), v.c, half_u, half_v  (camera frame)
-_N_PARAMS = 14
-
-
-@numba.njit(parallel=True, cache=True)
-def _cast_grid(xs, ys, prims, bbox, z_out, id_out, s_out, q_out, r_out):  # pragma: no cover
-    h, w = xs.shape
-    for r in numba.prange(h):
-        for c in range(w):
-            z_out[r, c] = np.inf
-            id_out[r, c] = -1
-            s_out[r, c] = np.nan
-            q_out[r, c] = np.nan
-        for p in range(prims.shape[0]):
-            if r < bbox[p, 0] or r > bbox[p, 1]:
-                continue
-            n0, n1, n2, nc = prims[p, 0], prims[p, 1], prims[p, 2], prims[p, 3]
-            u0, u1, u2, uc = prims[p, 4], prims[p, 5], prims[p, 6], prims[p, 7]
-            v0, v1, v2, vc = prims[p, 8], prims[p, 9], prims[p, 10], prims[p, 11]
-            hu, hv = prims[p, 12], prims[p, 13]
-            for c in range(bbox[p, 2], bbox[p, 3] + 1):
-                x = xs[r, c]
-                y = ys[r, c]
-                nd = n0 * x + n1 * y + n2
-                if nd == 0.0:
-                    continue
-                t = nc / nd
-                if t <= 0.0 or t >= z_out[r, c]:
-                    continue
-                s = t * (u0 * x + u1 * y + u2) - uc
-                if abs(s) > hu:
-                    continue
-                q = t * (v0 * x + v1 * y + v2) - vc
-                if abs(q) > hv:
-                    continue
-                z_out[r, c] = t
-                id_out[r, c] = p
-                s_out[r, c] = s
-                q_out[r, c] = q
-        for c in range(w):
-            x = xs[r, c]
-            y = ys[r, c]
-            r_out[r, c] = z_out[r, c] * np.sqrt(x * x + y * y + 1.0)
-
-
-@numba.njit(parallel=True, cache=True)
-def _blocked(points, prims, tol, out):  # pragma: no cover - JIT
-    # True where the segment from the origin to a point crosses a rect before the point.
-    for i in numba.prange(points.shape[0]):
-        x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        hit = False
-        if z != z:  # NaN point
-            out[i] = False
-            continue
-        for p in range(prims.shape[0]):
-            nd = prims[p, 0] * x + prims[p, 1] * y + prims[p, 2] * z
-            if nd == 0.0:
-                continue
-            t = prims[p, 3] / nd
-            if t <= 1e-9 or t >= 1.0 - tol:
-                continue
-            s = t * (prims[p, 4] * x + prims[p, 5] * y + prims[p, 6] * z) - prims[p, 7]
-            if abs(s) > prims[p, 12]:
-                continue
-            q = t * (prims[p, 8] * x + prims[p, 9] * y + prims[p, 10] * z) - prims[p, 11]
-            if abs(q) > prims[p, 13]:
-                continue
-            hit = True
-            break
-        out[i] = hit
-
-
-@numba.njit(parallel=True, cache=True)
-def _cast_rays(origins, dirs, skip, prims, t_out, id_out, s_out, q_out):  # pragma: no cover
-    # the nearest rect along each ray o + t d (t > 0), all rects tested: rays go anywhere
-    for i in numba.prange(origins.shape[0]):
-        ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
-        dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
-        best = np.inf
-        best_p = -1
-        best_s = np.nan
-        best_q = np.nan
-        for p in range(prims.shape[0]):
-            if p == skip[i]:
-                continue
-            nd = prims[p, 0] * dx + prims[p, 1] * dy + prims[p, 2] * dz
-            if nd == 0.0:
-                continue
-            t = (prims[p, 3] - (prims[p, 0] * ox + prims[p, 1] * oy + prims[p, 2] * oz)) / nd
-            if t <= 1e-9 or t >= best:
-                continue
-            x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
-            s = prims[p, 4] * x + prims[p, 5] * y + prims[p, 6] * z - prims[p, 7]
-            if abs(s) > prims[p, 12]:
-                continue
-            q = prims[p, 8] * x + prims[p, 9] * y + prims[p, 10] * z - prims[p, 11]
-            if abs(q) > prims[p, 13]:
-                continue
-            best, best_p, best_s, best_q = t, p, s, q
-        t_out[i] = best
-        id_out[i] = best_p
-        s_out[i] = best_s
-        q_out[i] = best_q
-
 
 def rect_params(scene: Scene, camera_from_world: RigidTransform) -> FloatArray:
-    """Kernel parameters (R, 14) of the scene's rects expressed in the camera frame."""
-    out = np.empty((len(scene.rects), _N_PARAMS))
+    """Kernel parameters (R, 14) of the scene's rects expressed in the camera frame
+    (:mod:`.kernels` has the layout)."""
+    out = np.empty((len(scene.rects), 14))
     rot, t = camera_from_world.rotation, camera_from_world.translation_m
     normals = scene.geometry.normal
     # one rect at a time: products of whole arrays would round a last bit differently
@@ -138,27 +37,83 @@ def rect_params(scene: Scene, camera_from_world: RigidTransform) -> FloatArray:
     return out
 
 
+_NEAREST_M = 1e-6  # a rect that passes nearer the camera centre is tested on every ray
+_MARGIN = 1e-9  # relative widening of a rect's view bounds, far beyond rounding
+
+
+def _view_bounds(
+    scene: Scene, camera_from_world: RigidTransform, reach: float
+) -> tuple[FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
+    """Where each rect can be seen by rays (x, y, 1) with |x|, |y| <= ``reach``: bounds
+    (R, 4) x0, x1, y0, y1 in undistorted normalised coordinates of the part of it in front of
+    the camera, whether any is (R,), and whether it passes so near the camera centre that
+    every ray must be tested (R,).
+
+    The part in front: the rect clipped at a depth eps too small for such a ray to meet it
+    there (eps = d / (4 sqrt(1 + 2 reach^2)), d the rect's distance from the camera centre:
+    a point that near lies nearer than d). A pinhole's image of that convex polygon is the
+    convex hull of its vertices', so their bounds (widened by far more than rounding) hold
+    every ray that meets the rect."""
+    g = scene.geometry
+    eye = camera_from_world.inverse().translation_m
+    d = eye - g.center_m  # the closest point of each rect to the eye, in its (s, q)
+    s = np.clip(np.einsum("ij,ij->i", d, g.axis_u), -g.half_m[:, 0], g.half_m[:, 0])
+    q = np.clip(np.einsum("ij,ij->i", d, g.axis_v), -g.half_m[:, 1], g.half_m[:, 1])
+    nearest = np.linalg.norm(d - s[:, None] * g.axis_u - q[:, None] * g.axis_v, axis=1)
+    eps = nearest / (4.0 * np.sqrt(1.0 + 2.0 * reach**2))
+    corners = camera_from_world.apply(scene.corners_m)  # (R, 4, 3)
+    a, b = corners, np.roll(corners, -1, axis=1)  # each edge a -> b
+    za, zb = a[..., 2] - eps[:, None], b[..., 2] - eps[:, None]
+    crosses = za * zb < 0
+    f = np.where(crosses, -za / np.where(crosses, zb - za, 1.0), 0.0)
+    pts = np.concatenate([a, a + f[..., None] * (b - a)], axis=1)  # (R, 8, 3)
+    kept = np.concatenate([za >= 0, crosses], axis=1)
+    z = np.where(kept, pts[..., 2], 1.0)
+    bounds = np.empty((len(g.center_m), 4))
+    # no warnings for a rect with nothing in front, or through the camera centre: those are
+    # marked as such
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k, axis in ((0, 0), (2, 1)):
+            x = pts[..., axis] / z
+            lo = np.where(kept, x, np.inf).min(axis=1)
+            hi = np.where(kept, x, -np.inf).max(axis=1)
+            bounds[:, k] = lo - _MARGIN * (1.0 + np.abs(lo))
+            bounds[:, k + 1] = hi + _MARGIN * (1.0 + np.abs(hi))
+    return bounds, np.asarray(kept.any(axis=1)), np.asarray(nearest <= _NEAREST_M)
+
+
+@lru_cache(maxsize=16)
+def _grid_extents(intr: Intrinsics, ss: int) -> tuple[FloatArray, ...]:
+    """A camera's (sub)pixel rays (:func:`~thermodepth.camera.pixel_rays`): the least and
+    greatest y of each row, x of each column, and the greatest |x| or |y| of all."""
+    xs, ys = pixel_rays(intr, ss)
+    reach = np.array([max(np.abs(xs).max(), np.abs(ys).max())])
+    return ys.min(axis=1), ys.max(axis=1), xs.min(axis=0), xs.max(axis=0), reach
+
+
 def _bboxes(
     scene: Scene, camera_from_world: RigidTransform, intr: Intrinsics, ss: int
 ) -> NDArray[np.int64]:
-    """Inclusive (row0, row1, col0, col1) of each rect in the supersampled grid, (R, 4):
-    the bounds of its projected outline plus a margin; the whole grid where the outline
-    reaches behind the camera or beyond the lens' valid radius, nothing where it is wholly
-    behind."""
-    h, w = intr.height * ss, intr.width * ss
-    pts = camera_from_world.apply(scene.outlines_m)  # (R, P, 3)
-    z = pts[..., 2]
-    px = intr.project(pts)
-    g = (np.nan_to_num(px) + 0.5) * ss - 0.5
-    margin = 2 * ss
-    c0, r0 = (np.floor(g.min(axis=1)).astype(np.int64) - margin).T
-    c1, r1 = (np.ceil(g.max(axis=1)).astype(np.int64) + margin).T
+    """Inclusive (row0, row1, col0, col1) of each rect in the supersampled grid, (R, 4): the
+    rows and columns whose rays reach into its view bounds (:func:`_view_bounds`), so every
+    ray that meets it is inside; nothing where no part of it is in front of the camera, the
+    whole grid where it passes by the camera centre."""
+    row_lo, row_hi, col_lo, col_hi, reach = _grid_extents(intr, ss)
+    bounds, front, near = _view_bounds(scene, camera_from_world, float(reach[0]))
+    rows = (row_hi >= bounds[:, 2, None]) & (row_lo <= bounds[:, 3, None])  # (R, H)
+    cols = (col_hi >= bounds[:, 0, None]) & (col_lo <= bounds[:, 1, None])  # (R, W)
+    h, w = rows.shape[1], cols.shape[1]
     out = np.stack(
-        [np.maximum(r0, 0), np.minimum(r1, h - 1), np.maximum(c0, 0), np.minimum(c1, w - 1)],
+        [
+            np.argmax(rows, axis=1),
+            h - 1 - np.argmax(rows[:, ::-1], axis=1),
+            np.argmax(cols, axis=1),
+            w - 1 - np.argmax(cols[:, ::-1], axis=1),
+        ],
         axis=1,
     )
-    out[np.any(z <= 1e-6, axis=1) | np.any(np.isnan(px), axis=(1, 2))] = [0, h - 1, 0, w - 1]
-    out[np.all(z <= 0, axis=1)] = [1, 0, 1, 0]  # empty
+    out[~(front & rows.any(axis=1) & cols.any(axis=1))] = [1, 0, 1, 0]  # empty
+    out[near] = [0, h - 1, 0, w - 1]
     return out
 
 
@@ -182,12 +137,22 @@ def cast(
 ) -> Hits:
     """Cast one ray per (sub)pixel of a camera into the scene; arrays (H*ss, W*ss)."""
     xs, ys = pixel_rays(intr, supersample)
-    prims = rect_params(scene, camera_from_world)
-    bbox = _bboxes(scene, camera_from_world, intr, supersample)
     z, s, q, rng = (np.empty(xs.shape) for _ in range(4))
     ids = np.empty(xs.shape, dtype=np.int64)
-    _cast_grid(xs, ys, prims, bbox, z, ids, s, q, rng)
+    kernels.cast_grid(
+        xs, ys, *grid_params(scene, camera_from_world, intr, supersample), z, ids, s, q, rng
+    )
     return Hits(z, ids, s, q, rng)
+
+
+def grid_params(
+    scene: Scene, camera_from_world: RigidTransform, intr: Intrinsics, supersample: int
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """What a cast of a camera's (sub)pixel grid takes: the rects' parameters in the camera
+    frame (:func:`rect_params`) and their bounding boxes in the grid (R, 4)."""
+    return rect_params(scene, camera_from_world), _bboxes(
+        scene, camera_from_world, intr, supersample
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,7 +190,7 @@ def cast_rays(
     skip = np.full(n, -1, np.int64) if skip is None else np.ascontiguousarray(skip, np.int64)
     t, s, q = np.empty(n), np.empty(n), np.empty(n)
     ids = np.empty(n, dtype=np.int64)
-    _cast_rays(o, d, skip, prims, t, ids, s, q)
+    kernels.cast_rays(o, d, skip, prims, t, ids, s, q)
     return RayHits(t, ids, s, q)
 
 
@@ -243,10 +208,16 @@ def blocked(
     reach into it are tested (a line of sight inside the image meets no other).
     """
     prims = rect_params(scene, camera_from_world)
-    if in_image is not None:
-        r0, r1, c0, c1 = _bboxes(scene, camera_from_world, in_image, 1).T
-        prims = np.ascontiguousarray(prims[(r0 <= r1) & (c0 <= c1)])
+    if in_image is not None:  # the image's extent: its pixel corners' rays, and 2 px more
+        xc, yc = corner_rays(in_image)
+        x0, x1 = xc.min() - 2.0 / in_image.fx, xc.max() + 2.0 / in_image.fx
+        y0, y1 = yc.min() - 2.0 / in_image.fy, yc.max() + 2.0 / in_image.fy
+        reach = max(abs(x0), abs(x1), abs(y0), abs(y1))
+        bounds, front, near = _view_bounds(scene, camera_from_world, reach)
+        seen = (bounds[:, 1] >= x0) & (bounds[:, 0] <= x1)
+        seen &= (bounds[:, 3] >= y0) & (bounds[:, 2] <= y1)
+        prims = np.ascontiguousarray(prims[near | (front & seen)])
     pts = np.ascontiguousarray(points_cam_m, dtype=np.float64).reshape(-1, 3)
     out = np.empty(pts.shape[0], dtype=np.bool_)
-    _blocked(pts, prims, tol, out)
+    kernels.blocked(pts, prims, tol, out)
     return out.reshape(np.shape(points_cam_m)[:-1])

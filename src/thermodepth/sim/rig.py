@@ -25,16 +25,13 @@ from .lepton import (
     FpaProfile,
     LeptonModel,
     LeptonSensor,
-    aperture_radiance,
     bolometer_memory,
     constant_fpa,
-    footprint_and_blur,
-    near_ir_albedo,
     radiance_table,
-    surface_properties,
 )
 from .raycast import Hits, blocked, cast
 from .scene import Scene
+from .shading import render_aperture, render_ir_albedo, surface_properties
 
 FloatArray = NDArray[np.float64]
 
@@ -187,8 +184,7 @@ class Rig:
             albedo = None
             if self.with_ir:  # near-IR albedo: the mean over each pixel's sub-rays
                 ss = self.depth_model.ir_supersample
-                ir_hits = cast(self.scene, depth_from_world, cal.depth, ss)
-                albedo = footprint_and_blur(near_ir_albedo(self.scene, ir_hits), ss, 0.0)
+                albedo = render_ir_albedo(self.scene, depth_from_world, cal.depth, ss)
             return _DepthViews(hits, shadow, albedo)
 
         views: _DepthViews = self._cached(self._depth_renders, pose, render)
@@ -199,13 +195,14 @@ class Rig:
         at ``pose``."""
 
         def render() -> FloatArray:
-            ss = self.lepton.supersample
-            thermal_from_world = self.calibration.thermal_from_depth @ pose.inverse()
-            hits = cast(self.scene, thermal_from_world, self.calibration.thermal, ss)
-            eye_m = thermal_from_world.inverse().translation_m
-            table = radiance_table(self.lepton.response)
-            sub = aperture_radiance(self.scene, hits, table, eye_m)
-            return footprint_and_blur(sub, ss, self.lepton.psf_sigma_px)
+            return render_aperture(
+                self.scene,
+                self.calibration.thermal_from_depth @ pose.inverse(),
+                self.calibration.thermal,
+                self.lepton.supersample,
+                self.lepton.psf_sigma_px,
+                radiance_table(self.lepton.response),
+            )
 
         aperture: FloatArray = self._cached(self._thermal_renders, pose, render)
         return aperture

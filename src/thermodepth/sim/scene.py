@@ -145,7 +145,7 @@ class Rect:
         return self.center_m + s * self.axis_u + q * self.axis_v
 
     def boundary_m(self, per_edge: int = 32) -> FloatArray:
-        """Points (4 * per_edge, 3) along the rect's edges (for projection bounds)."""
+        """Points (4 * per_edge, 3) along the rect's edges."""
         t = np.linspace(-1.0, 1.0, per_edge)
         one = np.ones_like(t)
         s = np.concatenate([t, one, -t, -one]) * self.half_u_m
@@ -242,9 +242,14 @@ class Scene:
         return RectArrays.of(self.rects)
 
     @cached_property
-    def outlines_m(self) -> FloatArray:
-        """Points (R, 128, 3) along each rect's edges (:meth:`Rect.boundary_m`)."""
-        return np.array([r.boundary_m() for r in self.rects], np.float64).reshape(-1, 128, 3)
+    def corners_m(self) -> FloatArray:
+        """Each rect's corners (R, 4, 3), in order round it: (-u, -v), (+u, -v), (+u, +v),
+        (-u, +v)."""
+        signs = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+        return np.array(
+            [r.point_m(signs[:, 0] * r.half_u_m, signs[:, 1] * r.half_v_m) for r in self.rects],
+            np.float64,
+        ).reshape(-1, 4, 3)
 
     @property
     def materials(self) -> tuple[Material, ...]:
