@@ -242,7 +242,17 @@ def test_home_assistant_discovery(
         again = discovery.until(lambda out: {t for t, _, _ in out} >= want)
         ha.disconnect()
         ha.loop_stop()
-        seen = states.until(lambda out: {t for t, _, _ in out} >= STATE_TOPICS)
+        heat = {t: m for t, m, _ in first}[
+            f"homeassistant/binary_sensor/{node}/b_alarm_latched/config"
+        ]
+
+        def latched(out: list[tuple[str, Any, bool]]) -> bool:  # every state, b's alarm raised
+            last = {t: m for t, m, _ in out}
+            return last.keys() >= STATE_TOPICS and (
+                render(heat["value_template"], last["plant/b/alarm_states"]) == "ON"
+            )
+
+        seen = states.until(latched)
     finally:
         monitor.stop()
     discovery.close()
@@ -258,7 +268,6 @@ def test_home_assistant_discovery(
     assert hottest["unique_id"] == "thermodepth_plant_a_hottest"
     for config in configs.values():  # what Home Assistant needs of every entity
         assert {"name", "unique_id", "state_topic", "device", "availability"} <= set(config)
-    heat = configs[f"homeassistant/binary_sensor/{node}/b_alarm_latched/config"]
     assert heat["device_class"] == "heat" and heat["state_topic"] == "plant/b/alarm_states"
     health = configs[f"homeassistant/binary_sensor/{node}/a_health/config"]
     assert health["device_class"] == "problem"

@@ -53,6 +53,8 @@ class Source:
 
     def require_pairs(self) -> None:
         """Raise a one-line InputError unless the source has both streams (can give pairs)."""
+        if not self.streams:  # e.g. a recording whose writer was stopped before its first frame
+            raise InputError(f"{self.name}: holds no frames: nothing to pair")
         if self.streams != {"depth", "thermal"}:
             have = " and ".join(sorted(self.streams)) or "nothing"
             raise InputError(
