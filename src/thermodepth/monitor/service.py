@@ -24,6 +24,7 @@ import sqlite3
 import threading
 import time
 from collections import Counter, deque
+from collections.abc import Iterable
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -192,6 +193,7 @@ class Monitor:
         raised = self._raised()
         for output in self.outputs:
             output.announce(raised)
+        self._warm_up(self.runners.values())
         for runner in self.runners.values():
             runner.start()
         self.workers.start()
@@ -201,6 +203,19 @@ class Monitor:
             ", ".join(self.runners),
             self.config.storage.path,
         )
+
+    def _warm_up(self, runners: Iterable[RigRunner]) -> None:
+        """Every kernel the rigs' frames run compiled before any rig runs (once per process;
+        numba keeps them on disk too): a compile in one rig's thread would hold the others'."""
+        t0 = time.monotonic()
+        seen: set[tuple[str | None, Path | None]] = set()
+        for runner in runners:  # the same settings file: the same kernels
+            key = (runner.settings_text, runner.config.settings)
+            if key not in seen:
+                seen.add(key)
+                runner.warm_up()
+        if (took_s := time.monotonic() - t0) > 1.0:
+            self.log.info("monitor: kernels compiled in %.0f s (numba keeps them on disk)", took_s)
 
     def stop(self, reason: str = "stopped") -> None:
         """Stop the rigs, finish the clips and recordings, say so to the outputs, close."""
@@ -262,6 +277,7 @@ class Monitor:
                 runner = self._runner(rig, config)
                 kept = runner.carry_over(gone[rig.name]) if rig.name in gone else []
                 self.runners[rig.name] = runner
+                self._warm_up([runner])
                 runner.start()
                 self.log.info(
                     "%s: started (reload)%s", rig.name,
@@ -275,8 +291,8 @@ class Monitor:
     def _rebuilt(self, output: Output) -> Output:
         """An output built again for the rigs now, started and announced."""
         for worker in output.workers():
-            worker.stop()
             self.workers.all.pop(worker.name, None)
+            worker.stop()
         output.stop("reloading")
         new = OUTPUT_BUILDERS[output.name].build(self.config, self._context())
         assert new is not None

@@ -129,6 +129,19 @@ class RigRunner:
         """A line of the rig's log, its name first."""
         self.log.log(level, "%s: %s", self.name, line)
 
+    def warm_up(self) -> None:
+        """Compile the numba kernels its frames run (:meth:`Pipeline.warm_up`) before it
+        starts: with its settings and its calibration or, when its source will tell it, the
+        simulated rig's (the kernels are the same). Settings it cannot load are left for its
+        opening to say (its log, its reopening)."""
+        from ..sim import default_calibration
+
+        try:
+            calibration = self.calibration or default_calibration()
+            Pipeline(self.settings, calibration, warn=lambda _: None).warm_up()
+        except ThermodepthError:
+            pass
+
     def start(self) -> None:
         self.thread.start()
 
@@ -170,6 +183,9 @@ class RigRunner:
                 self._reopen_later(attempt, f"cannot open ({exc})")
                 attempt += 1
                 continue
+            if self._stop.is_set():  # stopped while it opened: stop() closed the one before
+                self.source.close()
+                break
             opened += 1
             self.status.reconnects = opened - 1
             frames = self.status.frames
@@ -231,6 +247,8 @@ class RigRunner:
             self.source.close()
         if self.thread.is_alive():
             self.thread.join(timeout_s)
+        if self.thread.is_alive():  # it ends after its current step (it checks _stop)
+            self.say(f"still busy {timeout_s:g} s after it was asked to stop", logging.WARNING)
         self.status.state = "stopped"
 
     @property

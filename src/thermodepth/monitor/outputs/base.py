@@ -77,7 +77,8 @@ class Output:
         """Every part has started: say so (``raised``: each rig's raised rules)."""
 
     def workers(self) -> list[Worker]:
-        """Its long-running loops, for the monitor to start and supervise."""
+        """Its long-running loops, for the monitor to start, supervise and stop: the same
+        workers at every call (made once, with the output)."""
         return []
 
     def measured(self, rig: str, fused: FusedFrame) -> None:

@@ -81,6 +81,10 @@ class MqttOutput(Output):
         self._told: dict[str, tuple[str, str]] = {}  # each rig's state and health, as published
         self._recent: dict[str, deque[dict[str, Any]]] = {}
         self._announced = False
+        self._workers = [Worker("mqtt outbox", self._drain, 1.0, WORKER_LIMIT_S, self.log)]
+        if config.snapshots_hz > 0:
+            every_s = 1.0 / config.snapshots_hz
+            self._workers.append(Worker("mqtt snapshots", self._snapshots, every_s, WORKER_LIMIT_S))
 
     def topic(self, rig: str, leaf: str) -> str:
         return f"{self.target.prefix}/{rig}/{leaf}"
@@ -110,11 +114,7 @@ class MqttOutput(Output):
             Discovery(self.connection, prefix, where, self.entities, self.log).start()
 
     def workers(self) -> list[Worker]:
-        found = [Worker("mqtt outbox", self._drain, 1.0, WORKER_LIMIT_S, self.log)]
-        if self.config.snapshots_hz > 0:
-            every_s = 1.0 / self.config.snapshots_hz
-            found.append(Worker("mqtt snapshots", self._snapshots, every_s, WORKER_LIMIT_S))
-        return found
+        return list(self._workers)
 
     def fits(self, rigs: list[RigEntities]) -> bool:
         return rigs == self.entities
