@@ -332,21 +332,24 @@ def test_a_board_of_the_wrong_size_is_named_as_the_likely_cause(tmp_path: Path) 
 @needs_real
 def test_grid_continues_past_sub_grids_only() -> None:
     # the right size: no edge on any of OpenCV's 26 views; one column or row too few: the
-    # pattern goes on past an edge in most views where OpenCV finds the sub-grid
+    # pattern goes on past an edge in most views where OpenCV finds the sub-grid (every other
+    # view: a search for a board that is not there takes OpenCV 1.5 s a view)
     paths = sorted(REAL.glob("*.jpg"))
     assert len(paths) == 26
     flagged, seen = 0, 0
-    for path in paths:
+    for i, path in enumerate(paths):
         img = load_image(path)
         right = detect_board(img, BOARD_REAL)
         assert right is not None and grid_continues(img, right.points_px, BOARD_REAL) == ()
+        if i % 2:
+            continue
         for smaller in ("checkerboard:8x6", "checkerboard:9x5"):
             board = BoardSpec.parse(smaller, 1.0)
             det = detect_board(img, board)
             if det is not None:
                 seen += 1
                 flagged += bool(grid_continues(img, det.points_px, board))
-    assert seen >= 20 and flagged / seen >= 0.8
+    assert seen >= 10 and flagged / seen >= 0.8
 
 
 def test_grid_continues_on_simulated_lepton_views(sim_dir: Path) -> None:
