@@ -657,8 +657,8 @@ class Pipeline:
         trends and warnings are left as they were.
 
         Example:
-            >>> from thermodepth.sim import Rig
-            >>> Pipeline(Settings(), Rig().calibration).warm_up()
+            >>> from thermodepth.sim import default_calibration
+            >>> Pipeline(Settings(), default_calibration()).warm_up()
         """
         cal = self.calibration
         copy = Pipeline(self.settings, cal, self.registration, self.model, warn=lambda _: None)
