@@ -103,7 +103,7 @@ def test_sigkill_loses_no_published_event_and_it_starts_again(tmp_path: Path) ->
     assert published.keys() <= kept.keys()
     assert all(kept[i] == e for i, e in published.items())  # the same rows
     # every clip replays what it holds; the one being written when it was killed may have
-    # been cut before its first pair, and says so
+    # been cut before its first pair (no frame, or its first depth frame only), and says so
     clips = [e["clip"] for _, e in sorted(kept.items()) if e.get("clip")]  # the last, last
     replayed = {}
     for clip in dict.fromkeys(clips):
@@ -111,7 +111,7 @@ def test_sigkill_loses_no_published_event_and_it_starts_again(tmp_path: Path) ->
             with open_source(f"recording:{tmp_path / 'store' / 'clips' / clip / 'clip.zarr'}") as s:
                 replayed[clip] = len(list(s))
         except InputError as e:
-            assert clip == clips[-1] and "holds no frames" in str(e)
+            assert clip == clips[-1] and re.search(r"holds no frames|gives \w+ only", str(e))
     assert all(n >= 1 for n in replayed.values()) and replayed
     again = Process(path)
     try:
