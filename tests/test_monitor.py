@@ -90,7 +90,15 @@ def seen(tmp_path_factory: pytest.TempPathFactory) -> Seen:
         folder,
         [
             {"name": "a", "source": SLOW, "settings": flapping.name, "stall_s": 2.0},
-            {"name": "b", "source": "sim", "settings": flapping.name, "location": "bay 2"},
+            # b's stall_s long: on a busy machine a slow disk or a starved process may hold
+            # its frames for seconds; a no_data fault then would be the machine's, not b's
+            {
+                "name": "b",
+                "source": "sim",
+                "settings": flapping.name,
+                "location": "bay 2",
+                "stall_s": 10.0,
+            },
             {"name": "c", "source": ODD, "settings": paper.name},
         ],
         failsafe={
