@@ -366,6 +366,28 @@ def _add_footprints(row, ss, acc):  # pragma: no cover - JIT
         acc[j] += total
 
 
+@numba.njit(cache=True)
+def _footprint_means(acc, ss, out_row):  # pragma: no cover - JIT
+    # each pixel's sum of its ss x ss sub-rays -> their mean
+    for j in range(out_row.shape[0]):
+        out_row[j] = acc[j] / (ss * ss)
+
+
+@numba.njit(cache=True)
+def _hit_buffers(n):  # pragma: no cover - JIT
+    # a row of n rays' hits: depth z, rect ids, the rect coordinates s, q, material rows
+    return np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n), np.empty(n, np.int64)
+
+
+@numba.njit(cache=True)
+def _cast_row(
+    xs, ys, r, prims, bbox, slots, pattern, circles, missed, z, ids, s, q, rows
+):  # pragma: no cover - JIT
+    # grid row r's rays cast (_grid_row) and the material row of each hit (_slots)
+    _grid_row(xs, ys, r, prims, bbox, z, ids, s, q)
+    _slots(ids, s, q, slots, pattern, circles, missed, rows)
+
+
 @numba.njit(parallel=True, cache=True)
 def footprint(sub, ss, out):  # pragma: no cover - JIT
     """The mean of each pixel's ss x ss sub-rays (h ss, w ss) -> (h, w), bit for bit numpy's
@@ -375,8 +397,7 @@ def footprint(sub, ss, out):  # pragma: no cover - JIT
         acc = np.zeros(w)
         for a in range(ss):
             _add_footprints(sub[i * ss + a], ss, acc)
-        for j in range(w):
-            out[i, j] = acc[j] / (ss * ss)
+        _footprint_means(acc, ss, out[i])
 
 
 @numba.njit(parallel=True, cache=True)
@@ -388,16 +409,15 @@ def render_albedo(
     h, w = out.shape
     n = w * ss
     for i in numba.prange(h):
-        z, ids, s, q = np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n)
-        rows, value, acc = np.empty(n, np.int64), np.empty(n), np.zeros(w)
+        z, ids, s, q, rows = _hit_buffers(n)
+        value, acc = np.empty(n), np.zeros(w)
         for a in range(ss):
-            _grid_row(xs, ys, i * ss + a, prims, bbox, z, ids, s, q)
-            _slots(ids, s, q, slots, pattern, circles, missed, rows)
+            _cast_row(xs, ys, i * ss + a, prims, bbox, slots, pattern, circles, missed,
+                      z, ids, s, q, rows)  # fmt: skip
             for c in range(n):
                 value[c] = albedo[rows[c]]
             _add_footprints(value, ss, acc)
-        for j in range(w):
-            out[i, j] = acc[j] / (ss * ss)
+        _footprint_means(acc, ss, out[i])
 
 
 @numba.njit(parallel=True, cache=True)
@@ -409,18 +429,16 @@ def render_radiance(
     h, w = out.shape
     n = w * ss
     for i in numba.prange(h):
-        z, ids, s, q = np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n)
-        rows, dist, value, acc = np.empty(n, np.int64), np.empty(n), np.empty(n), np.zeros(w)
+        z, ids, s, q, rows = _hit_buffers(n)
+        dist, value, acc = np.empty(n), np.empty(n), np.zeros(w)
         for a in range(ss):
             r = i * ss + a
-            _grid_row(xs, ys, r, prims, bbox, z, ids, s, q)
+            _cast_row(xs, ys, r, prims, bbox, slots, pattern, circles, missed, z, ids, s, q, rows)
             for c in range(n):
                 dist[c] = _ray_range(z[c], xs[r, c], ys[r, c])
-            _slots(ids, s, q, slots, pattern, circles, missed, rows)
             _radiance(
                 ids, s, q, dist, rows, slots, pattern, circles, missed, mat, geo, world, env,
                 bounce, value,
             )  # fmt: skip
             _add_footprints(value, ss, acc)
-        for j in range(w):
-            out[i, j] = acc[j] / (ss * ss)
+        _footprint_means(acc, ss, out[i])
