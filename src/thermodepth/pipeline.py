@@ -667,13 +667,13 @@ class Pipeline:
         tlinear = ThermalOutput.kelvin_per(WARM_UP_TLINEAR_K)
         for output in dict.fromkeys((cal.thermal_output, tlinear)):
             value = np.round(output.values(signal, planck)).astype(np.uint16)
+            thermal = np.full(cal.thermal.shape, value, np.uint16)
             telemetry = Telemetry(
                 0, WARM_UP_TEMP_K, WARM_UP_TEMP_K, tlinear=output.is_kelvin,
                 tlinear_resolution_k=output.scale_k if output.is_kelvin else None,
             )  # fmt: skip
             for distance_m in WARM_UP_DISTANCES_M:
                 depth = np.full(cal.depth.shape, round(distance_m / cal.depth_scale_m), np.uint16)
-                thermal = np.full(cal.thermal.shape, value, np.uint16)
                 frame = copy.process(FramePair(depth, thermal, 0.0, 0.0, telemetry))
                 _ = frame.on_depth  # sampled when asked for, if no region asked for it
 

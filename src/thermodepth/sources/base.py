@@ -56,7 +56,7 @@ class Source:
         if not self.streams:  # e.g. a recording whose writer was stopped before its first frame
             raise InputError(f"{self.name}: holds no frames: nothing to pair")
         if self.streams != {"depth", "thermal"}:
-            have = " and ".join(sorted(self.streams)) or "nothing"
+            have = " and ".join(sorted(self.streams))
             raise InputError(
                 f"{self.name}: gives {have} only; FramePairs need a depth and a thermal camera "
                 "(use realsense+lepton, sim or recording:PATH)"
