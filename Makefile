@@ -21,10 +21,11 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/thermodepth demo --out $(OUT)
 
-# two workers, each a file at a time (a file's fixtures made once) and numba on one thread;
-# hypothesis draws the same examples every run (tests/conftest.py)
+# two workers, each a file at a time (a file's fixtures made once), the longest files first
+# (tests/conftest.py: LONGEST_FIRST) and numba on one thread; hypothesis draws the same
+# examples every run
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile --hypothesis-profile=ci
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --hypothesis-profile=ci
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

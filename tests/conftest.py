@@ -45,6 +45,40 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         process.wait()
 
 
+# `make test` hands whole files to its two workers, in this order first (the longest first, as
+# measured: `pytest --durations`), then the rest as collected: a long file started last would
+# keep one worker busy while the other has nothing left to do
+LONGEST_FIRST = (
+    "test_capture.py",
+    "test_docs.py",
+    "test_calibrate.py",
+    "test_cameras_end_to_end.py",
+    "test_monitor_workers.py",
+    "test_monitor.py",
+    "test_monitor_process.py",
+    "test_batch.py",
+    "test_folder.py",
+    "test_dashboard_pictures.py",
+    "test_monitor_opcua.py",
+    "test_recording.py",
+    "test_pipeline.py",
+    "test_collect.py",
+    "test_board_detection.py",
+    "test_monitor_mqtt.py",
+    "test_demo.py",
+    "test_dashboard.py",
+    "test_dashboard_browser.py",
+    "test_registration.py",
+)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The files of :data:`LONGEST_FIRST` first, in its order (sorting keeps each file's own
+    order and the order of the other files)."""
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
 @pytest.fixture(scope="session")
 def generalisation() -> Generalisation:
     """Both compensation methods fitted on a simulated sweep, with the held-out sweeps."""

@@ -28,6 +28,7 @@ from thermodepth.sim.rig import default_calibration
 runner = CliRunner()
 BOARD = BoardSpec.parse("checkerboard:9x6", 0.03)
 POSES, SEED = 8, 1  # simulate_targets and the board session place the same poses
+VIEWS = 20  # single views of the board for calibrate-camera
 
 
 def registration_error(cal: Calibration) -> np.ndarray:
@@ -163,13 +164,13 @@ def test_capture_board_command(session: Path, tmp_path: Path) -> None:
     res = runner.invoke(
         app,
         ["capture-board", "--source", f"recording:{session}", "--square-m", "0.03", "-o",
-         str(tmp_path / "p"), "--count", "3"],
+         str(tmp_path / "p"), "--count", "2"],
     )  # fmt: skip
     assert res.exit_code == 0, res.output
     text = " ".join(res.output.split())
-    assert f"kept 3 pairs in {tmp_path / 'p'}" in text and "stopped: count" in text
+    assert f"kept 2 pairs in {tmp_path / 'p'}" in text and "stopped: count" in text
     # the wrong board: nothing kept, and the line says what to check (on the first holds)
-    short = first_pairs(session, 16, tmp_path / "short.zarr")
+    short = first_pairs(session, 8, tmp_path / "short.zarr")
     res = runner.invoke(
         app,
         ["capture-board", "--source", f"recording:{short}", "--square-m", "0.03", "-o",
@@ -199,9 +200,9 @@ def first_pairs(recording: Path, n: int, out: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def views(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """40 simulated views of the board (the thermal images are the single views)."""
+    """VIEWS simulated views of the board (the thermal images are the single views)."""
     out = tmp_path_factory.mktemp("views")
-    simulate_targets(out, BOARD, 40, seed=4)
+    simulate_targets(out, BOARD, VIEWS, seed=4)
     return out
 
 
@@ -211,8 +212,8 @@ def test_calibrate_camera_writes_intrinsics_and_report(views: Path, tmp_path: Pa
     res = runner.invoke(app, ["calibrate-camera", str(views), "--square-m", "0.03", "-o", str(out)])
     assert res.exit_code == 0, res.output
     report = json.loads((tmp_path / "calib_report.json").read_text())
-    assert report["camera"] == "thermal" and report["images_found"] == 40
-    assert report["images_used"] >= 38 and report["rms_px"] < 0.1
+    assert report["camera"] == "thermal" and report["images_found"] == VIEWS
+    assert report["images_used"] >= VIEWS - 2 and report["rms_px"] < 0.1
     assert {s["reason"] for s in report["skipped"]} <= {"no checkerboard:9x6 found"}
     assert (tmp_path / "calib_report.png").is_file()
     truth = default_calibration().thermal
@@ -220,7 +221,7 @@ def test_calibrate_camera_writes_intrinsics_and_report(views: Path, tmp_path: Pa
 
     got = yaml.safe_load(out.read_text())
     assert set(got) == {"width", "height", "fx", "fy", "cx", "cy", "distortion"}
-    for key in ("fx", "fy", "cx", "cy"):  # measured within 0.2 % (seed 4)
+    for key in ("fx", "fy", "cx", "cy"):  # measured within 0.3 % (seed 4)
         assert got[key] == pytest.approx(getattr(truth, key), rel=0.005)
 
 
@@ -245,7 +246,7 @@ def test_thermal_intrinsics_held_fixed_in_the_stereo_step(
     report = json.loads((tmp_path / "calib_report.json").read_text())
     assert report["thermal_camera"]["model"] == "fixed"
     err = registration_error(cal)
-    assert err.max() < 0.3  # 40 views for the intrinsics, 8 pairs for the transform
+    assert err.max() < 0.3  # VIEWS views for the intrinsics, 8 pairs for the transform
 
 
 def test_calibrate_camera_bad_input_is_one_line(tmp_path: Path, views: Path) -> None:
@@ -272,7 +273,7 @@ def test_calibrate_camera_bad_input_is_one_line(tmp_path: Path, views: Path) -> 
     cv2.imwrite(str(mixed / "pose00_thermal.png"), np.zeros((60, 80), np.uint16))
     res = runner.invoke(app, ["calibrate-camera", str(mixed), "--square-m", "0.03"])
     assert res.exit_code == 2
-    assert "thermal image sizes differ: pose00_thermal.png is 80x60, but 39 are 160x120" in (
+    assert f"thermal image sizes differ: pose00_thermal.png is 80x60, but {VIEWS - 1} are 160x120" in (
         res.output
     )
     res = runner.invoke(
@@ -285,7 +286,7 @@ def test_calibrate_camera_bad_input_is_one_line(tmp_path: Path, views: Path) -> 
 
 
 def test_false_colour_captures_calibrate_as_the_counts_do(views: Path, tmp_path: Path) -> None:
-    # the same 40 captures saved as a viewer saves them: 8-bit ironbow of a stretched frame
+    # the same captures saved as a viewer saves them: 8-bit ironbow of a stretched frame
     ironbow = tmp_path / "ironbow"
     ironbow.mkdir()
     for f in views.glob("*_ir.png"):
@@ -295,8 +296,8 @@ def test_false_colour_captures_calibrate_as_the_counts_do(views: Path, tmp_path:
         cv2.imwrite(str(ironbow / f.name), apply_palette(counts, "ironbow")[..., ::-1])
     rgb = run_calibration(ironbow, BOARD)
     raw = run_calibration(views, BOARD)
-    assert len(rgb.used) == len(raw.used) == 40
-    # measured: thermal RMS 0.053 px both, registration RMS 0.081 px both (max 0.267 / 0.261)
+    assert len(rgb.used) == len(raw.used) == VIEWS
+    # measured: thermal RMS 0.050 / 0.051 px, registration RMS 0.080 / 0.081 px (max 0.267 both)
     assert rgb.thermal_fit.rms_px == pytest.approx(raw.thermal_fit.rms_px, rel=0.1)
     err_rgb, err_raw = registration_error(rgb.calibration), registration_error(raw.calibration)
     assert np.sqrt(np.mean(err_rgb**2)) < np.sqrt(np.mean(err_raw**2)) + 0.01
