@@ -273,9 +273,8 @@ def test_calibrate_camera_bad_input_is_one_line(tmp_path: Path, views: Path) -> 
     cv2.imwrite(str(mixed / "pose00_thermal.png"), np.zeros((60, 80), np.uint16))
     res = runner.invoke(app, ["calibrate-camera", str(mixed), "--square-m", "0.03"])
     assert res.exit_code == 2
-    assert f"thermal image sizes differ: pose00_thermal.png is 80x60, but {VIEWS - 1} are 160x120" in (
-        res.output
-    )
+    differ = f"pose00_thermal.png is 80x60, but {VIEWS - 1} are 160x120"
+    assert f"thermal image sizes differ: {differ}" in res.output
     res = runner.invoke(
         app, ["calibrate-camera", str(views), "--square-m", "0.03", "--camera", "x"]
     )
