@@ -8,14 +8,16 @@ its last pairs compressed in memory (Blosc LZ4), bounded by seconds and by bytes
 while a rig's clip is still being recorded extends that clip (one clip, both events) up to
 ``clip_max_s`` long; past that the clip ends and a new one begins. Each
 clip is written on its own thread and the pictures on one shared thread, so that a slow disk
-or a slow plot never holds up a rig; what cannot be kept (a full disk, a full queue) is told
-through ``on_fault``.
+or a slow plot never holds up a rig. What waits for them is bounded in bytes
+(:class:`~.bounded.ByteQueue`): a clip's pairs :data:`CLIP_QUEUE_BYTES`, the pictures
+:data:`PICTURES_BYTES`; a pair past the bound is left out of its clip and counted (the
+clip's ``frames_not_kept``), a picture past it is not drawn (``pictures_skipped``). What
+cannot be kept (a full disk, a full queue) is told through ``on_fault``.
 """
 
 from __future__ import annotations
 
 import os
-import queue
 import threading
 import time
 from collections import deque
@@ -33,6 +35,7 @@ from ..io.pointcloud import write_ply
 from ..io.recording import RecordingWriter
 from ..pipeline import FusedFrame
 from ..sinks.base import RunContext
+from .bounded import MB, ByteQueue, nbytes_of
 from .live import encode, framed, overlay_image
 from .logs import logger
 from .storage import fresh_path, stamp
@@ -41,8 +44,12 @@ from .workers import Worker
 _CODEC = Blosc("lz4", 5, Blosc.SHUFFLE)
 Packed = tuple[bytes, tuple[int, ...], str]
 _END = object()
-PICTURES_WAITING = 32
-"""Overlays and point clouds waiting to be drawn, at most (each takes about a second)."""
+CLIP_QUEUE_BYTES = 64 * MB
+"""A clip's pairs waiting for the disk, at most: 34 pairs of 1280x720 depth and a Lepton 3's
+counts (4 s of a rig), where 256 pairs (480 MB) were let wait before."""
+PICTURES_BYTES = 64 * MB
+"""The frames waiting to be drawn as an overlay and a point cloud (each takes about a
+second), at most: 9 fused 1280x720 frames with their depth grid (6.7 MB each)."""
 PAINTER_LIMIT_S = 60.0
 
 
@@ -158,7 +165,7 @@ class Clip:
         before: list[PackedMatch],
         until_s: float,
         on_fault: Callable[[str], None],
-        max_queue: int = 256,
+        max_bytes: int = CLIP_QUEUE_BYTES,
     ) -> None:
         self.id, self.folder, self.until_s = clip_id, folder, until_s
         self.started_s = before[0].thermal_time_s if before else until_s
@@ -167,9 +174,8 @@ class Clip:
         self.events: list[dict[str, Any]] = []
         self.written = 0
         self.lost = 0
-        self.max_queue = max_queue
-        self._queue: queue.Queue[Any] = queue.Queue()
-        for packed in before:
+        self._queue = ByteQueue(max_bytes)
+        for packed in before:  # the pre-trigger's own, bounded there: not counted twice
             self._queue.put(packed)
         self._failed = False
         self._thread = threading.Thread(
@@ -181,10 +187,8 @@ class Clip:
         """Queue a pair; False once the clip's time is over (the pair is not taken)."""
         if match.pair.thermal_time_s > self.until_s:
             return False
-        if self._queue.qsize() >= self.max_queue:  # the disk cannot keep up: say so, go on
+        if not self._queue.offer(match, nbytes_of(match)):  # the disk cannot keep up: go on
             self.lost += 1
-        else:
-            self._queue.put(match)
         return True
 
     def _write(self, context: RunContext) -> None:
@@ -246,7 +250,7 @@ class Evidence:
         self.open: dict[str, Clip] = {}
         self.finished: list[Clip] = []
         self._lock = threading.Lock()
-        self._pictures: queue.Queue[Any] = queue.Queue(PICTURES_WAITING)
+        self._pictures = ByteQueue(PICTURES_BYTES)
         self.painter = Worker("evidence pictures", self._paint, 10.0, PAINTER_LIMIT_S, self.log)
 
     def active_folders(self) -> set[Path]:
@@ -307,12 +311,14 @@ class Evidence:
             f"frame {fused.index}, "
             f"VOx {fused.vox_label}"
         )
-        try:
-            self._pictures.put_nowait((fused, clip.folder, title, range_c, rois, marked))
-        except queue.Full:  # a picture of an old event helps no one: the clip is kept
-            self.pictures_skipped += 1
+        item = (fused, clip.folder, title, range_c, rois, marked)
+        if not self._pictures.offer(item, nbytes_of(fused)):  # an old event's picture helps
+            self.pictures_skipped += 1  # no one: the clip is kept
             self.log.warning(
-                "clip %s: no overlay or point cloud (%d waiting)", clip.id, PICTURES_WAITING
+                "clip %s: no overlay or point cloud (%d pictures, %.0f MB waiting)",
+                clip.id,
+                len(self._pictures),
+                self._pictures.nbytes / MB,
             )
 
     def _paint(self, worker: Worker) -> None:
@@ -323,8 +329,8 @@ class Evidence:
         while True:
             worker.beat()
             try:
-                item = self._pictures.get(timeout=1.0)
-            except queue.Empty:
+                item = self._pictures.get(timeout_s=1.0)
+            except TimeoutError:
                 continue
             if item is _END:
                 return
