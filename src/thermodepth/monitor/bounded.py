@@ -36,7 +36,7 @@ def nbytes_of(item: Any, depth: int = 2) -> int:
                 return 0
             seen.add(id(x))
             return int(x.nbytes) if isinstance(x, np.ndarray) else len(x)
-        if left == 0 or isinstance(x, str | int | float | bool) or x is None:
+        if left == 0:
             return 0
         values = x if isinstance(x, tuple | list) else tuple(getattr(x, "__dict__", {}).values())
         return sum(walk(v, left - 1) for v in values)
@@ -46,13 +46,11 @@ def nbytes_of(item: Any, depth: int = 2) -> int:
 
 class ByteQueue:
     """A FIFO of at most ``max_bytes`` (each item's size given by the caller), for one or
-    more producers and consumers; ``refused`` counts the items :meth:`offer` did not take
-    and ``peak_bytes`` the most it held."""
+    more producers and consumers; ``refused`` counts the items :meth:`offer` did not take."""
 
     def __init__(self, max_bytes: int) -> None:
         self.max_bytes = max_bytes
         self.nbytes = 0
-        self.peak_bytes = 0
         self.refused = 0
         self._items: deque[tuple[Any, int]] = deque()
         self._ready = threading.Condition()
@@ -66,7 +64,6 @@ class ByteQueue:
                 return False
             self._items.append((item, nbytes))
             self.nbytes += nbytes
-            self.peak_bytes = max(self.peak_bytes, self.nbytes)
             self._ready.notify()
             return True
 

@@ -173,7 +173,6 @@ class Clip:
         self.pipeline = context.pipeline  # its ROIs and alarm rules, for the picture
         self.events: list[dict[str, Any]] = []
         self.written = 0
-        self.lost = 0
         self._queue = ByteQueue(max_bytes)
         for packed in before:  # the pre-trigger's own, bounded there: not counted twice
             self._queue.put(packed)
@@ -187,9 +186,13 @@ class Clip:
         """Queue a pair; False once the clip's time is over (the pair is not taken)."""
         if match.pair.thermal_time_s > self.until_s:
             return False
-        if not self._queue.offer(match, nbytes_of(match)):  # the disk cannot keep up: go on
-            self.lost += 1
+        self._queue.offer(match, nbytes_of(match))  # refused: the disk cannot keep up; go on
         return True
+
+    @property
+    def lost(self) -> int:
+        """The pairs left out of the clip: its queue was full (:data:`CLIP_QUEUE_BYTES`)."""
+        return self._queue.refused
 
     def _write(self, context: RunContext) -> None:
         source = context.source
@@ -246,12 +249,16 @@ class Evidence:
     ) -> None:
         self.root, self.pre_s, self.post_s, self.max_s = root, pre_s, post_s, max_s
         self.on_fault, self.log = on_fault, logger("evidence")
-        self.pictures_skipped = 0
         self.open: dict[str, Clip] = {}
         self.finished: list[Clip] = []
         self._lock = threading.Lock()
         self._pictures = ByteQueue(PICTURES_BYTES)
         self.painter = Worker("evidence pictures", self._paint, 10.0, PAINTER_LIMIT_S, self.log)
+
+    @property
+    def pictures_skipped(self) -> int:
+        """The pictures not drawn: too many bytes were waiting (:data:`PICTURES_BYTES`)."""
+        return self._pictures.refused
 
     def active_folders(self) -> set[Path]:
         """The folders of clips still being written (never deleted by the storage rule)."""
@@ -313,8 +320,7 @@ class Evidence:
         )
         item = (fused, clip.folder, title, range_c, rois, marked)
         if not self._pictures.offer(item, nbytes_of(fused)):  # an old event's picture helps
-            self.pictures_skipped += 1  # no one: the clip is kept
-            self.log.warning(
+            self.log.warning(  # no one: the clip is kept
                 "clip %s: no overlay or point cloud (%d pictures, %.0f MB waiting)",
                 clip.id,
                 len(self._pictures),
