@@ -10,6 +10,7 @@ import re
 import shutil
 import socket
 import sqlite3
+import threading
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -30,7 +31,8 @@ from thermodepth.monitor.config import FailsafeConfig, StorageConfig, load_confi
 from thermodepth.monitor.evidence import PackedMatch, PreTrigger
 from thermodepth.monitor.failsafe import Fault, SensorWatch
 from thermodepth.monitor.rig import PacedSource
-from thermodepth.monitor.storage import Retention, stamp
+from thermodepth.monitor import storage
+from thermodepth.monitor.storage import ContinuousRecorder, Retention, stamp
 from thermodepth.monitor.store import MIGRATIONS, EventStore
 from thermodepth.monitor.systemd import notify, watchdog_interval_s
 from thermodepth.pipeline import PixelFlag
@@ -443,6 +445,48 @@ def test_retention_by_age_then_free_space_continuous_first(tmp_path: Path) -> No
     assert not clip2.exists() and busy.exists()
 
 
+def test_a_continuous_segment_that_fails_as_it_closes_pauses_the_next(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a full disk seen only when the segment closes (its writer thread was behind): told, and
+    # no segment is started for RETRY_S, as when add sees it (not one segment every segment_s)
+    started: list[Path] = []
+    behind = threading.Event()  # the writer thread is behind until set
+
+    class Writer:
+        def __init__(self, path: Path, *args: Any, **kwargs: Any) -> None:
+            started.append(path)
+
+    class FullDisk:
+        def __init__(self, writer: Writer, block: bool) -> None:
+            pass
+
+        def add(self, event: Any) -> None:
+            pass
+
+        def close(self, attrs: Any) -> None:
+            behind.wait(60)
+            raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(storage, "RecordingWriter", Writer)
+    monkeypatch.setattr(storage, "Recorder", FullDisk)
+    faults: list[str] = []
+    recorder = ContinuousRecorder(tmp_path, segment_s=0.0, on_fault=faults.append)
+    source = SimpleNamespace(calibration=None, settings=dict, name="sim", device_depth=False)
+    recorder.open(SimpleNamespace(source=source, calibration=None, provenance={}))
+    recorder.add("pair")
+    recorder.add("pair")  # the first segment's time is up: closed on its thread; a second
+    assert len(started) == 2 and not faults
+    behind.set()
+    recorder.join()
+    assert len(faults) == 1
+    assert "not closed cleanly ([Errno 28] No space left on device)" in faults[0]
+    for _ in range(5):
+        recorder.add("pair")  # the second closes (told), and none is started
+        recorder.join()
+    assert len(started) == 2 and len(faults) == 2
+
+
 # -- a recording at its recorded pace -----------------------------------------------------------
 
 
@@ -460,10 +504,12 @@ def test_a_recording_replays_at_its_pace_on_unix_time_and_again(tmp_path: Path) 
     indices = [g[0] for g in got]
     assert indices == list(range(100, 114))  # numbered on, again and again
     times = np.array([g[1] for g in got])
-    assert times[0] == pytest.approx(t0, abs=0.3)  # Unix time
-    assert np.allclose(np.diff(times), 1 / 8.7, atol=0.02)  # the recorded pace, passes joined
     released = np.array([g[2] for g in got])
-    assert np.all(np.abs(released - times) < 0.05)  # released when a camera would send it
+    assert t0 - 0.01 <= times[0] <= released[0]  # Unix time, from when it was started
+    assert np.allclose(np.diff(times), 1 / 8.7, atol=0.02)  # the recorded pace, passes joined
+    # released when a camera would send it: never before its time (how late a busy machine
+    # makes it is the bench's to measure, and past LATE_S it would be dropped, counted below)
+    assert np.all(released >= times - 0.01)
     assert paced.dropped == 0
 
 

@@ -3,8 +3,8 @@ and the rule that keeps the disk from filling.
 
 ``STORAGE/continuous/RIG/STAMP.zarr``: a new segment every ``segment_s``, written on a
 background thread that drops rather than stalls a live rig (``RecorderSink``'s rule). A segment
-that cannot be written (a full disk) is told through ``on_fault`` and no segment is tried
-again for :data:`RETRY_S`.
+that cannot be written or closed (a full disk) is told through ``on_fault`` and no segment
+is tried again for :data:`RETRY_S`.
 
 :class:`Retention` deletes, oldest first, what is older than ``retention_days``, then, while
 less than ``min_free_gb`` is free, continuous segments and only then clips (the event rows
@@ -113,6 +113,9 @@ class ContinuousRecorder:
             try:
                 recorder.close(attrs)
             except Exception as exc:
+                # the writer thread can fail after the segment's time is up (a slow disk, a
+                # busy machine): the same pause as a failure seen by add
+                self._retry_at = time.monotonic() + RETRY_S
                 self.on_fault(f"continuous recording {path}: not closed cleanly ({exc})")
 
         thread = threading.Thread(target=close, name=f"closing {path}", daemon=True)
