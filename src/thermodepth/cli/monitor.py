@@ -1,4 +1,5 @@
-"""``monitor`` and ``dashboard``: the always-on monitor, and one screen for many."""
+"""``monitor`` and ``dashboard``: the always-on monitor, and one screen for many; ``compile``:
+numba's kernels into their cache before them."""
 
 from __future__ import annotations
 
@@ -31,6 +32,24 @@ def monitor_cmd(
         console.print(f"{config}: OK", markup=False, highlight=False)
         return
     run_monitor(config)
+
+
+@app.command("compile")
+@one_line_errors
+def compile_cmd(
+    only: Annotated[
+        str | None, typer.Option(help="One part: pipeline (registration) or sim (simulator).")
+    ] = None,
+) -> None:
+    """Compile the numba kernels into their cache on disk now (after an install, in an
+    image's build), so that no later command or rig compiles them as it starts."""
+    from ..app.kernels import PARTS, compile_kernels
+    from ..errors import FieldError
+
+    if only is not None and only not in PARTS:
+        raise FieldError("only", f"{only!r} is not one of {', '.join(PARTS)}")
+    for line in compile_kernels(PARTS if only is None else (only,)):
+        console.print(line, markup=False, highlight=False)
 
 
 @app.command("dashboard")
