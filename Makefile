@@ -21,12 +21,10 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/thermodepth demo --out $(OUT)
 
-# numba's kernels compiled into their cache first, two parts side by side (else each worker
-# and each command a test starts compiles them); then two workers, each a file at a time (a
-# file's fixtures made once), the longest files first (tests/conftest.py: LONGEST_FIRST) and
-# numba on one thread; hypothesis draws the same examples every run
+# two workers, each a file at a time (a file's fixtures made once), the longest files first
+# (tests/conftest.py: LONGEST_FIRST) and numba on one thread; hypothesis draws the same
+# examples every run
 test: $(STAMP)
-	$(BIN)/thermodepth compile --only sim & sim=$$!; $(BIN)/thermodepth compile --only pipeline && wait $$sim
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --hypothesis-profile=ci
 
 bench: $(STAMP)

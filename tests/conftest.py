@@ -14,6 +14,7 @@ if os.environ.get("PYTEST_XDIST_WORKER"):  # `make test`: two workers, one core 
 
 from hypothesis import settings
 
+from thermodepth.app.kernels import PARTS
 from thermodepth.evaluation import Generalisation, compensation_generalisation
 
 # `make test` (--hypothesis-profile=ci): the same examples every run, so that the suite that
@@ -24,23 +25,19 @@ settings.register_profile("ci", derandomize=True, database=None)
 # numba compiles a kernel on its first call (cached on disk after): in a fresh clone each
 # `make test` worker would compile the pipeline's and the simulator's at once, one core each,
 # and a subprocess started meanwhile a third time. Compiled once, side by side, first.
-WARM_UP = (
-    "from thermodepth.pipeline import Pipeline, Settings\n"
-    "from thermodepth.sim import default_calibration\n"
-    "Pipeline(Settings(), default_calibration()).warm_up()",
-    "from thermodepth.sources import open_source\n"
-    "with open_source('sim', frames=1, with_ir=True) as source:\n"
-    "    list(source)",
-)
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
     """`make test` (xdist's controller only): the kernels most tests run compiled first
-    (WARM_UP). A warm-up that fails is left for the tests to show."""
+    (`thermodepth compile`, a process a part). A compile that fails is left for the tests to
+    show."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    warming = [subprocess.Popen([sys.executable, "-c", code]) for code in WARM_UP]
+    warming = [
+        subprocess.Popen([sys.executable, "-m", "thermodepth.cli", "compile", "--only", part])
+        for part in PARTS
+    ]
     for process in warming:
         process.wait()
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -405,3 +407,28 @@ def test_every_cli_module_stays_thin() -> None:
     lines = {p.name: len(p.read_text(encoding="utf-8").splitlines()) for p in folder.glob("*.py")}
     assert {"__init__.py", "measure.py", "monitor.py"} <= set(lines)
     assert {name: n for name, n in lines.items() if n > 400} == {}
+
+
+def test_compile_readies_each_part_s_kernels_and_refuses_an_unknown_part() -> None:
+    # in a fresh interpreter: nothing compiled or loaded before, both parts' kernels after
+    script = """
+from thermodepth.cli import app
+from thermodepth.registration import kernels as reg
+from thermodepth.sim import kernels as sim
+ready = lambda: [bool(k.signatures) for k in (reg.sample, reg.zbuffer, sim.render_radiance)]
+print(ready())
+try:
+    app(["compile"])
+except SystemExit as end:
+    print(end.code, ready())
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=600
+    )
+    lines = done.stdout.splitlines()
+    assert len(lines) == 4 and lines[0] == "[False, False, False]"
+    assert lines[1].startswith("pipeline: kernels ready in ")
+    assert lines[2].startswith("sim: kernels ready in ") and lines[3] == "0 [True, True, True]"
+    result = runner.invoke(app, ["compile", "--only", "maps"])
+    assert result.exit_code == 2
+    assert result.output.strip() == "error: --only: 'maps' is not one of pipeline, sim"

@@ -5,7 +5,7 @@ simulator's ~20 s of one core, cached ~1 s).
 
 Two parts that share nothing, so that two processes can compile them side by side:
 ``pipeline`` (registration, radiometry: :meth:`~thermodepth.pipeline.Pipeline.warm_up`) and
-``sim`` (a simulated pair rendered).
+``sim`` (a simulated pair rendered, its IR image too).
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ def _pipeline() -> None:
 def _sim() -> None:
     from ..sources import open_source
 
-    for _ in open_source("sim", frames=1):
-        pass
+    with open_source("sim", frames=1, with_ir=True) as source:
+        list(source)
 
 
 _COMPILE: dict[str, Callable[[], None]] = {"pipeline": _pipeline, "sim": _sim}
