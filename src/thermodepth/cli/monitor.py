@@ -18,14 +18,27 @@ def monitor_cmd(
     check: Annotated[
         bool, typer.Option("--check", help="Only check the config and say what it sets up.")
     ] = False,
+    modbus_map: Annotated[
+        bool,
+        typer.Option(
+            "--modbus-map",
+            help="Only print the Modbus server's register map as CSV "
+            "(address,table,type,scale,unit,rig,name; addresses from 0).",
+        ),
+    ] = False,
 ) -> None:
     """Watch rigs day and night (docs/monitor.md): each rig reopened when its camera fails,
     sensor faults raised when data cannot be trusted, every event kept with its evidence
-    (a clip, an overlay, a point cloud), storage bounded, health on HTTP and MQTT. Runs until
-    SIGTERM or Ctrl-C; SIGHUP reloads the config."""
+    (a clip, an overlay, a point cloud), storage bounded, health on HTTP, MQTT, OPC UA and
+    Modbus. Runs until SIGTERM or Ctrl-C; SIGHUP reloads the config."""
     from ..app.monitor import describe_config, run_monitor
     from ..monitor import load_config
 
+    if modbus_map:
+        from ..monitor.outputs.modbus import config_map_csv
+
+        typer.echo(config_map_csv(load_config(config)), nl=False)
+        return
     if check:
         for line in describe_config(load_config(config)):
             console.print(line, markup=False, highlight=False, soft_wrap=True)

@@ -92,19 +92,29 @@ class HttpConfig(StrictSchema):
     def address(self) -> tuple[str, int]:
         """(host, port) of ``listen``; ValueError if it is not ``HOST:PORT``."""
         assert self.listen is not None
-        host, sep, port = self.listen.rpartition(":")
-        if not sep or not host or not port.isdigit() or not 0 <= int(port) < 65536:
-            raise ValueError(f"listen: {self.listen!r}: expected HOST:PORT (127.0.0.1:8088)")
-        return host.strip("[]"), int(port)
+        return listen_address(self.listen, DEFAULT_LISTEN)
 
     def loopback(self) -> bool:
-        host = self.address()[0]
-        if host == "localhost":
-            return True
-        try:
-            return ipaddress.ip_address(host).is_loopback
-        except ValueError:
-            return False
+        return loopback_host(self.address()[0])
+
+
+def listen_address(listen: str, example: str) -> tuple[str, int]:
+    """(host, port) of a ``HOST:PORT``; ValueError (``listen: ...``, with ``example``) if it
+    is not one."""
+    host, sep, port = listen.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) < 65536:
+        raise ValueError(f"listen: {listen!r}: expected HOST:PORT ({example})")
+    return host.strip("[]"), int(port)
+
+
+def loopback_host(host: str) -> bool:
+    """Only this machine can reach ``host``."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 class MqttConfig(MqttSettings):
@@ -151,6 +161,26 @@ class OpcUaConfig(StrictSchema):
         return m.group(1).strip("[]"), int(m.group(2))
 
 
+DEFAULT_MODBUS = "127.0.0.1:5020"
+
+
+class ModbusConfig(StrictSchema):
+    """The Modbus TCP server (:mod:`.outputs.modbus`): ``listen`` (``HOST:PORT``; Modbus has
+    no authentication: beyond this machine only with ``allow_remote``), ``unit_id`` (the
+    unit it answers as), ``allow_ack`` (a coil per latched rule: writing 1 acknowledges it),
+    ``word_order`` of 32-bit values (``big``: high word first)."""
+
+    listen: str = DEFAULT_MODBUS
+    unit_id: int = Field(default=1, ge=1, le=255)
+    allow_ack: bool = False
+    allow_remote: bool = False
+    word_order: Literal["big", "little"] = "big"
+
+    def address(self) -> tuple[str, int]:
+        """(host, port) of ``listen``; ValueError if it is not ``HOST:PORT``."""
+        return listen_address(self.listen, DEFAULT_MODBUS)
+
+
 class FailsafeConfig(StrictSchema):
     """When a rig's data cannot be trusted (a ``sensor_fault``): ``vox_margin_c`` beyond the
     VOx range its compensation was fitted on; the shutter closed ``shutter_max_s`` on end, or
@@ -186,6 +216,7 @@ class MonitorConfig(StrictSchema):
     http: HttpConfig = HttpConfig()
     mqtt: MqttConfig | None = None
     opcua: OpcUaConfig | None = None
+    modbus: ModbusConfig | None = None
     failsafe: FailsafeConfig = FailsafeConfig()
     log: LogConfig = LogConfig()
 
@@ -313,8 +344,8 @@ def http_problems(
 def config_problems(config: MonitorConfig) -> list[str]:
     """Every problem of a valid-looking config, one line each: rig names twice, sources,
     settings files and the calibration and compensation files they name, the listen address,
-    a token where one is needed, the broker's URL and password, OPC UA's users, the log's
-    rigs."""
+    a token where one is needed, the broker's URL and password, OPC UA's users, Modbus's
+    address and register room, the log's rigs."""
     problems = []
     twice = repeated(r.name for r in config.rigs)
     if twice:
@@ -332,6 +363,7 @@ def config_problems(config: MonitorConfig) -> list[str]:
         except InputError as exc:
             problems.append(f"mqtt.password_file: {exc}")
     problems.extend(_opcua_problems(config.opcua))
+    problems.extend(_modbus_problems(config))
     names = {r.name for r in config.rigs}
     problems.extend(
         f"log.rigs.{rig}: no rig of that name ({', '.join(sorted(names))})"
@@ -370,6 +402,29 @@ def _opcua_problems(opcua: OpcUaConfig | None) -> list[str]:
             "opcua: nobody could connect: give users_file (user: password), or anonymous: true"
         )
     return problems
+
+
+def _modbus_problems(config: MonitorConfig) -> list[str]:
+    """What is wrong with the Modbus section: its address, who could reach it (Modbus has no
+    authentication), the rigs, ROIs and rules beyond its register map's room."""
+    modbus = config.modbus
+    if modbus is None:
+        return []
+    problems = []
+    try:
+        host = modbus.address()[0]
+    except ValueError as exc:
+        problems.append(f"modbus.{exc}")
+    else:
+        if not loopback_host(host) and not modbus.allow_remote:
+            problems.append(
+                f"modbus.listen: {modbus.listen} is reachable from other machines and Modbus "
+                "has no authentication: set modbus.allow_remote: true (on a control network "
+                "only), or listen on 127.0.0.1"
+            )
+    from .outputs.modbus import room_problems  # the register map's room is its module's
+
+    return problems + room_problems(config)
 
 
 def read_token(path: Path) -> str:

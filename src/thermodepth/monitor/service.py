@@ -124,13 +124,7 @@ class Monitor:
     def entities(self) -> list[RigEntities]:
         """What each rig shows a plant's systems: its ROIs and alarm rules."""
         return [
-            RigEntities(
-                r.name,
-                r.config.location,
-                [roi.name for roi in r.settings.rois],
-                [a.name for a in r.settings.alarms],
-            )
-            for r in self.runners.values()
+            RigEntities.of(r.name, r.config.location, r.settings) for r in self.runners.values()
         ]
 
     def output(self, name: str) -> Output | None:

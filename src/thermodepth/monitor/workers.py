@@ -1,6 +1,6 @@
 """The monitor's own long-running loops, each a named, supervised :class:`Worker` (as every rig
 is, :mod:`.supervisor`): the clock, the storage sweep, the evidence painter, the broker's
-outbox and snapshots, the HTTP and OPC UA servers.
+outbox and snapshots, the HTTP, OPC UA and Modbus servers.
 
 A worker runs its loop on a thread of its own. An exception the loop does not handle is
 logged with its traceback and the loop is started again after a backoff of 1, 2, 4 ... 30 s

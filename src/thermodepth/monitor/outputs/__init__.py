@@ -7,6 +7,7 @@ module              what
 :mod:`.mqtt`        MQTT: each rig under its prefix, events from the outbox, acknowledgements
 :mod:`.homeassistant`  Home Assistant's MQTT discovery (with MQTT)
 :mod:`.opcua`       an OPC UA server: readings, alarm states and events
+:mod:`.modbus`      a Modbus TCP server: readings, health, alarm states, acknowledging coils
 ==================  ===========================================================================
 
 :data:`OUTPUT_BUILDERS` makes each from its section of the config (``None``: not asked for),
@@ -46,6 +47,14 @@ def _opcua(config: MonitorConfig, context: OutputContext) -> Output | None:
     return OpcUaOutput(config.opcua, context)
 
 
+def _modbus(config: MonitorConfig, context: OutputContext) -> Output | None:
+    if config.modbus is None:
+        return None
+    from .modbus import ModbusOutput
+
+    return ModbusOutput(config.modbus, context)
+
+
 def _describe_mqtt(config: MonitorConfig) -> str | None:
     from .mqtt import describe
 
@@ -58,9 +67,16 @@ def _describe_opcua(config: MonitorConfig) -> str | None:
     return None if config.opcua is None else describe(config.opcua)
 
 
+def _describe_modbus(config: MonitorConfig) -> str | None:
+    from .modbus import describe
+
+    return None if config.modbus is None else describe(config.modbus)
+
+
 OUTPUT_BUILDERS: dict[str, OutputKind] = {
     "mqtt": OutputKind(_mqtt, _describe_mqtt),
     "opcua": OutputKind(_opcua, _describe_opcua),
+    "modbus": OutputKind(_modbus, _describe_modbus),
 }
 """Each output by the config section that asks for it."""
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 if TYPE_CHECKING:
-    from ...pipeline import FusedFrame
+    from ...pipeline import FusedFrame, Settings
     from ..config import MonitorConfig
     from ..live import Picture
     from ..store import EventStore
@@ -32,12 +32,36 @@ Pictures = Callable[[str, str, "int | None"], "Picture | None"]
 
 
 class RigEntities(NamedTuple):
-    """What a rig shows a plant's systems: its name, location, ROIs and alarm rules."""
+    """What a rig shows a plant's systems: its name, location, ROIs and alarm rules (each in
+    its settings' order), and which rules latch (wait for an acknowledgement)."""
 
     name: str
     location: str | None
     rois: list[str]
     rules: list[str]
+    latched: tuple[str, ...] = ()
+
+    @classmethod
+    def of(cls, name: str, location: str | None, settings: Settings) -> RigEntities:
+        """A rig's entities from its settings."""
+        return cls(
+            name,
+            location,
+            [roi.name for roi in settings.rois],
+            [a.name for a in settings.alarms],
+            tuple(a.name for a in settings.alarms if a.latch),
+        )
+
+
+def entities_of(config: MonitorConfig) -> list[RigEntities]:
+    """Every rig's entities as a config sets them up (its settings files read), in its
+    order; for what is told before the monitor runs (``--check``, a register map)."""
+    from ...pipeline import Settings
+
+    return [
+        RigEntities.of(r.name, r.location, Settings.load(r.settings) if r.settings else Settings())
+        for r in config.rigs
+    ]
 
 
 @dataclass
