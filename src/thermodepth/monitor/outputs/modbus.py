@@ -141,11 +141,10 @@ def map_csv(rigs: list[RigEntities], allow_ack: bool) -> str:
 
 
 def config_map_csv(config: MonitorConfig) -> str:
-    """The register map of a config's rigs (its settings files read), as CSV; InputError
-    when the config has no ``modbus`` section."""
-    if config.modbus is None:
-        raise InputError("modbus: the config has no modbus section (no Modbus server)")
-    return map_csv(entities_of(config), config.modbus.allow_ack)
+    """The register map of a config's rigs (its settings files read), as CSV; without a
+    ``modbus`` section, the map one with its defaults would serve (a PLC's tags can be made
+    before the server is turned on)."""
+    return map_csv(entities_of(config), (config.modbus or ModbusConfig()).allow_ack)
 
 
 def room_problems(config: MonitorConfig) -> list[str]:
