@@ -207,17 +207,26 @@ def event(n: int, **extra: Any) -> dict[str, Any]:
 
 def test_the_store_keeps_events_newest_first_and_its_outbox(tmp_path: Path) -> None:
     store = EventStore(tmp_path / "e.sqlite")
-    ids = [store.add(event(n, clip=f"a/{n}"), outbox=n % 2 == 0) for n in range(5)]
+    targets = [("mqtt", "webhook:ops") if n % 2 == 0 else ("webhook:ops",) if n == 1 else ()
+               for n in range(5)]  # fmt: skip
+    ids = [store.add(event(n, clip=f"a/{n}"), outbox=targets[n]) for n in range(5)]
     assert [e["id"] for e in store.events()] == ids[::-1]
     assert [e["frame"] for e in store.events(2, before_id=ids[3])] == [2, 1]
-    assert [e["id"] for e in store.outbox()] == [ids[0], ids[2], ids[4]]
-    store.delivered(ids[2])
-    assert [e["id"] for e in store.outbox(after_id=ids[0])] == [ids[4]]
+    assert [e["id"] for e in store.outbox(target="mqtt")] == [ids[0], ids[2], ids[4]]
+    store.delivered(ids[2], "mqtt")
+    assert [e["id"] for e in store.outbox(after_id=ids[0], target="mqtt")] == [ids[4]]
+    # each output its own rows: the broker's delivery leaves the webhook's
+    assert [e["id"] for e in store.outbox(target="webhook:ops")] == ids[:3] + ids[4:]
+    store.delivered(ids[0], "webhook:ops")
+    assert store.waiting("webhook:ops") == 3 and store.waiting("mqtt") == 2
+    assert [e["id"] for e in store.outbox()] == [ids[0], ids[1], ids[2], ids[4]]  # for anyone
     store.clip_deleted("a/1")
     assert [e["clip_kept"] for e in store.events()] == [True, True, True, False, True]
     store.close()
     again = EventStore(tmp_path / "e.sqlite")  # what was written stays
-    assert again.count() == 5 and [e["id"] for e in again.outbox()] == [ids[0], ids[4]]
+    assert again.count() == 5 and [e["id"] for e in again.outbox(target="mqtt")] == [
+        ids[0], ids[4]
+    ]  # fmt: skip
     mode = again.db.execute("PRAGMA journal_mode").fetchone()[0]
     assert mode == "wal"
 
@@ -253,6 +262,17 @@ def test_the_schema_is_versioned_and_migrated(tmp_path: Path) -> None:
     with pytest.raises(sqlite3.IntegrityError):
         now.add({**event(3), "origin": "edge1/a#7"})  # a central dashboard's copy: once
     now.close()
+    two = EventStore(tmp_path / "v2.sqlite", MIGRATIONS[:2])  # one outbox: the broker's
+    kept = [two.add(event(n)) for n in range(3)]
+    two.db.executemany("INSERT INTO outbox (event_id) VALUES (?)", [(kept[0],), (kept[2],)])
+    two.close()
+    three = EventStore(tmp_path / "v2.sqlite")
+    assert three.version == n
+    assert [e["id"] for e in three.outbox(target="mqtt")] == [kept[0], kept[2]]
+    assert three.outbox(target="webhook:ops") == []
+    three.add(event(4), outbox=("mqtt", "webhook:ops"))
+    assert three.waiting("mqtt") == 3 and three.waiting("webhook:ops") == 1
+    three.close()
 
 
 def test_a_file_that_is_not_a_store_is_one_line(tmp_path: Path) -> None:

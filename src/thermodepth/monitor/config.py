@@ -7,12 +7,14 @@ relative to the file's folder.
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import os
 import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
+from urllib.parse import urlsplit
 
 from pydantic import Field, ValidationError, field_validator
 
@@ -82,12 +84,14 @@ class HttpConfig(StrictSchema):
     """The dashboard, API and health server: ``listen`` (``HOST:PORT``, port 0: any free one;
     null: none), ``token_file`` (its first line is the token every route but ``/healthz``
     wants; else ``THERMODEPTH_HTTP_TOKEN``; needed to listen beyond this machine),
-    ``tls_cert`` and ``tls_key`` (PEM files: HTTPS)."""
+    ``tls_cert`` and ``tls_key`` (PEM files: HTTPS), ``public_url`` (where people reach
+    it, ``https://monitor.example``, behind a proxy too: the notifications' links)."""
 
     listen: str | None = DEFAULT_LISTEN
     token_file: Path | None = None
     tls_cert: Path | None = None
     tls_key: Path | None = None
+    public_url: str | None = None
 
     def address(self) -> tuple[str, int]:
         """(host, port) of ``listen``; ValueError if it is not ``HOST:PORT``."""
@@ -217,6 +221,7 @@ class MonitorConfig(StrictSchema):
     mqtt: MqttConfig | None = None
     opcua: OpcUaConfig | None = None
     modbus: ModbusConfig | None = None
+    notify: list[NotifyConfig] = Field(default_factory=list)
     failsafe: FailsafeConfig = FailsafeConfig()
     log: LogConfig = LogConfig()
 
@@ -258,6 +263,8 @@ def _resolved(config: MonitorConfig, base: Path) -> MonitorConfig:
                 "certificate_dir": _relative(base, config.opcua.certificate_dir),
             }
         )
+    if config.notify:
+        update["notify"] = [_notify_resolved(target, base) for target in config.notify]
     if config.mqtt is not None:
         update["mqtt"] = config.mqtt.model_copy(
             update={
@@ -338,6 +345,10 @@ def http_problems(
             read_token(http.token_file)
         except InputError as exc:
             problems.append(f"{key('token_file')}: {exc}")
+    if http.public_url is not None and not web_url(http.public_url):
+        problems.append(
+            f"{key('public_url')}: {http.public_url!r}: expected http(s)://HOST[:PORT][/PATH]"
+        )
     return problems
 
 
@@ -364,6 +375,7 @@ def config_problems(config: MonitorConfig) -> list[str]:
             problems.append(f"mqtt.password_file: {exc}")
     problems.extend(_opcua_problems(config.opcua))
     problems.extend(_modbus_problems(config))
+    problems.extend(notify_problems(config))
     names = {r.name for r in config.rigs}
     problems.extend(
         f"log.rigs.{rig}: no rig of that name ({', '.join(sorted(names))})"
@@ -451,3 +463,161 @@ def load_config(path: str | Path) -> MonitorConfig:
     if problems:
         raise InputError("\n".join(f"{p}: {line}" for line in problems))
     return config
+
+
+# -- notifications (the notify: list; one output per target, outputs/notify.py) ---------------
+
+NOTIFY_EVENTS = ("alarm", "escalated", "acknowledged", "clear")
+"""The event kinds a target's ``events`` may name (besides rule names)."""
+FAULT_RULES = ("sensor_fault", "storage_fault")
+
+
+class NotifyTarget(StrictSchema):
+    """What every notification target has: ``name`` (unique; its name in ``/api/status`` and
+    its rows' in the outbox: keep it across restarts; default ``KIND-HOST``), ``events``
+    (which go: an event goes when its kind, ``alarm``, ``escalated``, ``acknowledged``,
+    ``clear``, or its rule, ``hot``, ``sensor_fault``, ``storage_fault``, is listed),
+    ``max_per_hour`` (messages at most; beyond it events are held back and sent as one
+    digest when the hour allows), ``timeout_s`` (one attempt), ``ca_file`` (a PEM bundle to
+    trust instead of the system's: a private CA)."""
+
+    kind: str
+    name: str | None = Field(default=None, pattern=r"^[A-Za-z0-9][A-Za-z0-9_.@-]*$")
+    events: list[str] = Field(default_factory=lambda: ["alarm", "escalated"], min_length=1)
+    max_per_hour: int = Field(default=60, ge=1)
+    timeout_s: float = Field(default=10.0, gt=0)
+    ca_file: Path | None = None
+
+    def target_name(self) -> str:
+        """``KIND:NAME``: its outbox rows' and ``/api/status``'s name."""
+        return f"{self.kind}:{self.name or self.default_name()}"
+
+    def default_name(self) -> str:
+        raise NotImplementedError
+
+    def goes(self, event: dict[str, object]) -> bool:
+        """Whether ``events`` lets an event through (its kind or its rule listed)."""
+        return event.get("event") in self.events or event.get("rule") in self.events
+
+
+class WebhookConfig(NotifyTarget):
+    """A webhook: ``url`` (``https://...``) gets a JSON POST of each event, signed with the
+    first line of ``secret_file`` (HMAC-SHA256 of the body, ``X-Thermodepth-Signature``)."""
+
+    kind: Literal["webhook"]
+    url: str
+    secret_file: Path
+
+    def default_name(self) -> str:
+        return urlsplit(self.url).hostname or "webhook"
+
+
+class EmailConfig(NotifyTarget):
+    """E-mail: ``smtp`` (``HOST[:PORT]``, port 587 with ``starttls``, else 25), ``starttls``
+    (upgrade to TLS before anything is said; the certificate verified), ``user`` and
+    ``password_file`` (its first line; AUTH only over TLS), ``from``, ``to`` (addresses)."""
+
+    kind: Literal["email"]
+    smtp: str
+    starttls: bool = True
+    user: str | None = None
+    password_file: Path | None = None
+    sender: str = Field(alias="from")
+    to: list[str] = Field(min_length=1)
+
+    def default_name(self) -> str:
+        return self.to[0]
+
+    def address(self) -> tuple[str, int]:
+        """(host, port) of ``smtp``; ValueError when it is not ``HOST[:PORT]``."""
+        host, sep, port = self.smtp.rpartition(":")
+        if not sep:
+            host, port = self.smtp, "587" if self.starttls else "25"
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"{self.smtp!r}: expected HOST[:PORT] (mail.example:587)")
+        return host.strip("[]"), int(port)
+
+
+NotifyConfig = Annotated[WebhookConfig | EmailConfig, Field(discriminator="kind")]
+
+
+def web_url(url: str) -> bool:
+    """``url`` is ``http(s)://HOST...``."""
+    parts = urlsplit(url)
+    return parts.scheme in ("http", "https") and bool(parts.hostname)
+
+
+def first_line(path: Path, what: str) -> str:
+    """A secret's file's first line (InputError naming the file when unreadable or empty)."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    if not lines or not lines[0].strip():
+        raise InputError(f"{path}: empty (the first line is the {what})")
+    return lines[0].strip()
+
+
+def _notify_resolved(
+    target: WebhookConfig | EmailConfig, base: Path
+) -> WebhookConfig | EmailConfig:
+    keys = ("ca_file", "secret_file", "password_file")
+    return target.model_copy(
+        update={k: _relative(base, getattr(target, k)) for k in keys if hasattr(target, k)}
+    )
+
+
+def notify_problems(config: MonitorConfig) -> list[str]:
+    """What is wrong with the ``notify`` list, one line each: names twice, a URL or an SMTP
+    address, the secret and password files, ``events`` naming neither an event kind nor a
+    rule of any rig."""
+    problems = []
+    names = [t.target_name() for t in config.notify]
+    twice = repeated(names)
+    if twice:
+        problems.append(
+            f"notify: {', '.join(map(repr, twice))} twice: give each target its own name"
+        )
+    rules = set(FAULT_RULES)
+    for rig in config.rigs:
+        with contextlib.suppress(ThermodepthError):  # told as the rig's own problem
+            rules |= {a.name for a in (Settings.load(rig.settings).alarms if rig.settings else ())}
+    for i, t in enumerate(config.notify):
+        where = f"notify.{i} ({t.target_name()})"
+        unknown = [w for w in t.events if w not in NOTIFY_EVENTS and w not in rules]
+        if unknown:
+            problems.append(
+                f"{where}.events: {', '.join(map(repr, unknown))}: neither an event "
+                f"({', '.join(NOTIFY_EVENTS)}) nor a rule ({', '.join(sorted(rules))})"
+            )
+        if t.ca_file is not None and not t.ca_file.is_file():
+            problems.append(f"{where}.ca_file: {t.ca_file}: no such file")
+        if isinstance(t, WebhookConfig):
+            if not web_url(t.url):
+                problems.append(f"{where}.url: {t.url!r}: expected https://HOST[:PORT]/PATH")
+            secrets: list[tuple[str, Path | None, str]] = [
+                ("secret_file", t.secret_file, "webhook's secret")
+            ]
+        else:
+            try:
+                t.address()
+            except ValueError as exc:
+                problems.append(f"{where}.smtp: {exc}")
+            bad = [a for a in (t.sender, *t.to) if "@" not in a]
+            if bad:
+                problems.append(f"{where}: {', '.join(map(repr, bad))}: not an e-mail address")
+            if (t.user is None) != (t.password_file is None):
+                problems.append(f"{where}: user and password_file go together")
+            if t.user is not None and not t.starttls:
+                problems.append(f"{where}: a password is only sent over TLS: set starttls: true")
+            secrets = [("password_file", t.password_file, "SMTP password")]
+        for key, path, what in secrets:
+            if path is not None:
+                try:
+                    first_line(path, what)
+                except InputError as exc:
+                    problems.append(f"{where}.{key}: {exc}")
+    return problems
+
+
+MonitorConfig.model_rebuild()  # its notify list's types are defined in the block above

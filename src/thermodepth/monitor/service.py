@@ -119,6 +119,8 @@ class Monitor:
             self.picture,
             self._delivered,
             lambda: self.status()["rigs"],
+            self.evidence_of,
+            self._snapshot_file,
         )
 
     def entities(self) -> list[RigEntities]:
@@ -288,8 +290,8 @@ class Monitor:
             self.workers.all.pop(worker.name, None)
             worker.stop()
         output.stop("reloading")
-        new = OUTPUT_BUILDERS[output.name].build(self.config, self._context())
-        assert new is not None
+        built = OUTPUT_BUILDERS[output.section].build(self.config, self._context())
+        new = next(o for o in built if o.name == output.name)
         new.start()
         new.announce(self._raised())
         for worker in new.workers():
@@ -380,12 +382,12 @@ class Monitor:
         event["time_utc"] = utc_of(time_s if unix_time and time_s else time.time())
         event["state"] = event["event"]  # the lifecycle's word for it, as the store's column
         why = None
-        outbox = [o for o in self.outputs if o.outbox]
+        outbox = [o for o in self.outputs if o.outbox and o.wants(event)]
         with self._lock:
             self.event_counts[(event["rig"], event["event"])] += 1
             self._flush_backlog()
             try:
-                event["id"] = self.store.add(event, outbox=bool(outbox))
+                event["id"] = self.store.add(event, outbox=[o.name for o in outbox])
             except sqlite3.Error as exc:
                 self.backlog.append(event)
                 why = (
@@ -617,6 +619,13 @@ class Monitor:
         if what == "clip.zip" and folder in self.evidence.active_folders():
             raise ClipNotReadyError(f"event {event_id}: its clip is still being recorded")
         return path if path.exists() else None
+
+    def _snapshot_file(self, event_id: int, what: str) -> Path | None:
+        """An event's evidence file for an output (a clip still recorded: none yet)."""
+        try:
+            return self.evidence_file(event_id, what)
+        except ClipNotReadyError:
+            return None
 
     def evidence_of(self, event: dict[str, Any]) -> list[str]:
         """What :meth:`evidence_file` may give for an event: all of it while its clip is

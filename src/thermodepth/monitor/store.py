@@ -1,6 +1,8 @@
 """The event store: every event of every rig as a row of one SQLite file (WAL mode), written
-before the event is published, and the outbox of events the MQTT broker has not yet
-acknowledged (so that they survive the broker's absence and the monitor's restart).
+before the event is published, and the outbox: each event's row per output that delivers
+from it (the MQTT broker, each notification target: its ``target``, the output's name) until
+that output has it delivered, so that it survives the receiver's absence and the monitor's
+restart; each output reads and clears its own rows.
 
 The schema is versioned (SQLite's ``user_version``) and migrated on open: each entry of
 :data:`MIGRATIONS` takes a file from one version to the next, in one transaction. A file of a
@@ -13,7 +15,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +50,18 @@ MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE events ADD COLUMN origin TEXT;
     CREATE UNIQUE INDEX events_by_origin ON events (origin);
+    """,
+    # an outbox row per output (the broker, each notification target): the rows there were
+    # the broker's, the only output that delivered from it
+    """
+    CREATE TABLE deliveries (
+        target TEXT NOT NULL,
+        event_id INTEGER NOT NULL REFERENCES events (id),
+        PRIMARY KEY (target, event_id)
+    ) WITHOUT ROWID;
+    INSERT INTO deliveries (target, event_id) SELECT 'mqtt', event_id FROM outbox;
+    DROP TABLE outbox;
+    ALTER TABLE deliveries RENAME TO outbox;
     """,
 )
 """Version N+1 of the schema from version N (the first: from an empty file)."""
@@ -101,11 +115,12 @@ class EventStore:
                 ) from None
         return len(migrations)
 
-    def add(self, event: dict[str, Any], outbox: bool = False) -> int:
+    def add(self, event: dict[str, Any], outbox: Collection[str] = ()) -> int:
         """Write an event (a dict with ``rig``, ``rule``, ``level``, ``event``, ``time_utc``
-        and what else it tells); with ``outbox`` it also waits in the outbox until
-        :meth:`delivered`. Returns its id. sqlite3.Error when it cannot be written (a full
-        disk); sqlite3.IntegrityError when one of the same ``origin`` is there already."""
+        and what else it tells); it also waits in the outbox for each target of ``outbox``
+        (the outputs' names) until :meth:`delivered` to it. Returns its id. sqlite3.Error
+        when it cannot be written (a full disk); sqlite3.IntegrityError when one of the same
+        ``origin`` is there already."""
         row = {k: event.get(k) for k in COLUMNS}
         row["state"] = event["event"]
         values = [row[k] for k in COLUMNS]
@@ -120,7 +135,10 @@ class EventStore:
                 )
                 event_id = int(cur.lastrowid or 0)
                 if outbox:
-                    self.db.execute("INSERT INTO outbox (event_id) VALUES (?)", (event_id,))
+                    self.db.executemany(
+                        "INSERT INTO outbox (target, event_id) VALUES (?, ?)",
+                        [(target, event_id) for target in outbox],
+                    )
                 self.db.execute("COMMIT")
             except BaseException:
                 if self.db.in_transaction:  # else ROLLBACK's own error would hide the cause
@@ -169,18 +187,29 @@ class EventStore:
         found = self._rows("SELECT id, body, clip_kept FROM events WHERE id = ?", [event_id])
         return found[0] if found else None
 
-    def outbox(self, limit: int = 1000, after_id: int = 0) -> list[dict[str, Any]]:
-        """Events waiting for the broker, oldest first."""
+    def outbox(
+        self, limit: int = 1000, after_id: int = 0, target: str | None = None
+    ) -> list[dict[str, Any]]:
+        """Events waiting for ``target`` (None: for any), oldest first."""
+        where, args = ("AND target = ?", [target]) if target is not None else ("", [])
         return self._rows(
-            "SELECT id, body, clip_kept FROM events JOIN outbox ON outbox.event_id = events.id "
-            "WHERE id > ? ORDER BY id LIMIT ?",
-            [after_id, limit],
+            "SELECT id, body, clip_kept FROM events WHERE id IN (SELECT event_id FROM outbox "
+            f"WHERE event_id > ? {where}) ORDER BY id LIMIT ?",
+            [after_id, *args, limit],
         )
 
-    def delivered(self, event_id: int) -> None:
-        """The broker has the event: out of the outbox."""
+    def waiting(self, target: str) -> int:
+        """How many events wait for ``target``."""
         with self._lock:
-            self.db.execute("DELETE FROM outbox WHERE event_id = ?", (event_id,))
+            found = self.db.execute("SELECT count(*) FROM outbox WHERE target = ?", (target,))
+            return int(found.fetchone()[0])
+
+    def delivered(self, event_id: int, target: str) -> None:
+        """``target`` has the event (or gave it up): out of its outbox."""
+        with self._lock:
+            self.db.execute(
+                "DELETE FROM outbox WHERE target = ? AND event_id = ?", (target, event_id)
+            )
 
     def clip_deleted(self, clip: str) -> None:
         """The events whose clip the storage rule deleted say so."""

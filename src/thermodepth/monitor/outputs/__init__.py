@@ -8,10 +8,14 @@ module              what
 :mod:`.homeassistant`  Home Assistant's MQTT discovery (with MQTT)
 :mod:`.opcua`       an OPC UA server: readings, alarm states and events
 :mod:`.modbus`      a Modbus TCP server: readings, health, alarm states, acknowledging coils
+:mod:`.notify`      notifications' common delivery: the outbox, retries, the hourly limit
+:mod:`.webhook`     a notification target: a signed JSON POST of each event
+:mod:`.email`       a notification target: an e-mail of each event, its overlay attached
 ==================  ===========================================================================
 
-:data:`OUTPUT_BUILDERS` makes each from its section of the config (``None``: not asked for),
-in the order they start; a new output is one more file and one more entry.
+:data:`OUTPUT_BUILDERS` makes each from its section of the config (none: not asked for; the
+``notify`` list one output per target), in the order they start; a new output is one more
+file and one more entry.
 """
 
 from __future__ import annotations
@@ -24,73 +28,84 @@ from .base import Output, OutputContext, RigEntities
 
 
 class OutputKind(NamedTuple):
-    """How an output is made from the config (``build``: None when its section is absent)
-    and how it is told in one line without making it (``describe``: ``monitor --check``)."""
+    """How outputs are made from the config (``build``: none when its section is absent)
+    and told a line each without making them (``describe``: ``monitor --check``)."""
 
-    build: Callable[[MonitorConfig, OutputContext], Output | None]
-    describe: Callable[[MonitorConfig], str | None]
+    build: Callable[[MonitorConfig, OutputContext], list[Output]]
+    describe: Callable[[MonitorConfig], list[str]]
 
 
-def _mqtt(config: MonitorConfig, context: OutputContext) -> Output | None:
+def _mqtt(config: MonitorConfig, context: OutputContext) -> list[Output]:
     if config.mqtt is None:
-        return None
+        return []
     from .mqtt import MqttOutput
 
-    return MqttOutput(config.mqtt, context)
+    return [MqttOutput(config.mqtt, context)]
 
 
-def _opcua(config: MonitorConfig, context: OutputContext) -> Output | None:
+def _opcua(config: MonitorConfig, context: OutputContext) -> list[Output]:
     if config.opcua is None:
-        return None
+        return []
     from .opcua import OpcUaOutput
 
-    return OpcUaOutput(config.opcua, context)
+    return [OpcUaOutput(config.opcua, context)]
 
 
-def _modbus(config: MonitorConfig, context: OutputContext) -> Output | None:
+def _modbus(config: MonitorConfig, context: OutputContext) -> list[Output]:
     if config.modbus is None:
-        return None
+        return []
     from .modbus import ModbusOutput
 
-    return ModbusOutput(config.modbus, context)
+    return [ModbusOutput(config.modbus, context)]
 
 
-def _describe_mqtt(config: MonitorConfig) -> str | None:
+def _notify(config: MonitorConfig, context: OutputContext) -> list[Output]:
+    from .notify import notifier
+
+    return [notifier(target, context) for target in config.notify]
+
+
+def _describe_mqtt(config: MonitorConfig) -> list[str]:
     from .mqtt import describe
 
-    return None if config.mqtt is None else describe(config.mqtt)
+    return [] if config.mqtt is None else [describe(config.mqtt)]
 
 
-def _describe_opcua(config: MonitorConfig) -> str | None:
+def _describe_opcua(config: MonitorConfig) -> list[str]:
     from .opcua import describe
 
-    return None if config.opcua is None else describe(config.opcua)
+    return [] if config.opcua is None else [describe(config.opcua)]
 
 
-def _describe_modbus(config: MonitorConfig) -> str | None:
+def _describe_modbus(config: MonitorConfig) -> list[str]:
     from .modbus import describe
 
-    return None if config.modbus is None else describe(config.modbus)
+    return [] if config.modbus is None else [describe(config.modbus)]
+
+
+def _describe_notify(config: MonitorConfig) -> list[str]:
+    from .notify import describe
+
+    return [describe(target) for target in config.notify]
 
 
 OUTPUT_BUILDERS: dict[str, OutputKind] = {
     "mqtt": OutputKind(_mqtt, _describe_mqtt),
     "opcua": OutputKind(_opcua, _describe_opcua),
     "modbus": OutputKind(_modbus, _describe_modbus),
+    "notify": OutputKind(_notify, _describe_notify),
 }
 """Each output by the config section that asks for it."""
 
 
 def build_outputs(config: MonitorConfig, context: OutputContext) -> list[Output]:
     """The outputs a config asks for, in :data:`OUTPUT_BUILDERS`' order (not started)."""
-    built = (kind.build(config, context) for kind in OUTPUT_BUILDERS.values())
-    return [output for output in built if output is not None]
+    return [o for kind in OUTPUT_BUILDERS.values() for o in kind.build(config, context)]
 
 
 def describe_outputs(config: MonitorConfig) -> list[str]:
     """What each output a config asks for would serve, a line each (none: none asked)."""
-    told = (kind.describe(config) for kind in OUTPUT_BUILDERS.values())
-    return [line for line in told if line is not None]
+    return [line for kind in OUTPUT_BUILDERS.values() for line in kind.describe(config)]
 
 
 __all__ = [

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 if TYPE_CHECKING:
@@ -68,8 +69,10 @@ def entities_of(config: MonitorConfig) -> list[RigEntities]:
 class OutputContext:
     """What the monitor gives an output's builder: the config, the rigs, the event store (its
     outbox), how to acknowledge, the live pictures, whom to tell when an event has been
-    delivered (``delivered(event)``: the latency figures) and the rigs' status now
-    (``rig_status()``: ``/api/status``'s ``rigs``)."""
+    delivered (``delivered(event)``: the broker's latency figures), the rigs' status now
+    (``rig_status()``: ``/api/status``'s ``rigs``), and an event's evidence as the HTTP API
+    gives it (``evidence_of(event)``: its names; ``evidence_file(id, name)``: the file, None
+    while there is none)."""
 
     config: MonitorConfig
     rigs: list[RigEntities]
@@ -78,16 +81,28 @@ class OutputContext:
     picture: Pictures
     delivered: Callable[[dict[str, Any]], None]
     rig_status: Callable[[], list[dict[str, Any]]]
+    evidence_of: Callable[[dict[str, Any]], list[str]]
+    evidence_file: Callable[[int, str], Path | None]
 
 
 class Output:
     """One of the monitor's outputs (module docstring); every method but :meth:`describe` and
     :meth:`start` may be left as it is."""
 
-    name: ClassVar[str]
+    name: str
+    """Its name in ``/api/status``'s ``outputs`` (and its rows' in the outbox): unique."""
     outbox: ClassVar[bool] = False
     """Its events are delivered from the event store's outbox (kept on disk until it has
-    them)."""
+    them: rows of its own, under its :attr:`name`)."""
+
+    @property
+    def section(self) -> str:
+        """The config section it is made from (its key in ``OUTPUT_BUILDERS``)."""
+        return self.name
+
+    def wants(self, event: dict[str, Any]) -> bool:
+        """Whether an event goes into the outbox for it (an outbox output)."""
+        return True
 
     def describe(self) -> str:
         """One line: what it serves or where it sends (``monitor --check``, the log)."""

@@ -164,7 +164,9 @@ class MqttOutput(Output):
             self._wake.clear()
             if self.connection.pending >= limit:
                 continue  # the broker is away: the rest waits on disk
-            for event in self.store.outbox(limit - self.connection.pending, self._sent_to):
+            for event in self.store.outbox(
+                limit - self.connection.pending, self._sent_to, self.name
+            ):
                 if not self._send(event):
                     break
                 self._sent_to = event["id"]
@@ -172,7 +174,7 @@ class MqttOutput(Output):
     def _send(self, event: dict[str, Any]) -> bool:
         def acked() -> None:
             if "id" in event:
-                self.store.delivered(event["id"])
+                self.store.delivered(event["id"], self.name)
             self.context.delivered(event)
 
         payload = json.dumps(jsonable(event))
