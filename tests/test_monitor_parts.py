@@ -27,11 +27,11 @@ from thermodepth.compensation import preset
 from thermodepth.compensation.files import save_model
 from thermodepth.errors import InputError
 from thermodepth.frames import FfcState, Telemetry, match_of
+from thermodepth.monitor import storage
 from thermodepth.monitor.config import FailsafeConfig, StorageConfig, load_config
 from thermodepth.monitor.evidence import PackedMatch, PreTrigger
 from thermodepth.monitor.failsafe import Fault, SensorWatch
 from thermodepth.monitor.rig import PacedSource
-from thermodepth.monitor import storage
 from thermodepth.monitor.storage import ContinuousRecorder, Retention, stamp
 from thermodepth.monitor.store import MIGRATIONS, EventStore
 from thermodepth.monitor.systemd import notify, watchdog_interval_s

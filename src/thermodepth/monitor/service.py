@@ -3,7 +3,8 @@ evidenced and published, the storage kept bounded, health told over HTTP and to 
 
 Every event goes the same way (:meth:`Monitor.emit`): a raising event gets its clip first
 (:mod:`.evidence`), then its row in the event store (written before it is published), then the
-broker's outbox, then a log line. An event the store cannot take (a full disk) is published
+outbox (a row for each outbox output that wants it: the broker, each notification target),
+then a log line. An event the store cannot take (a full disk) is published
 from memory, kept in memory until the store takes it again, and raises a ``storage_fault``:
 measuring and alarming go on.
 
