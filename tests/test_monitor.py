@@ -31,7 +31,7 @@ from monitor_helpers import (
     settings_file,
     wait_for,
 )
-from thermodepth.monitor import Monitor, load_config
+from thermodepth.monitor import Monitor, load_config, service
 from thermodepth.monitor.http import WEB
 from thermodepth.monitor.store import EventStore
 from thermodepth.pipeline import Pipeline, Settings
@@ -423,8 +423,12 @@ def test_events_the_store_cannot_take_are_kept_published_and_written_later(
         monitor.sweep()  # ... and a sweep with nothing new to tell clears the fault
         stored = monitor.store.events(1000)
         assert {"alarm", "clear"} <= {e["event"] for e in stored if e["rule"] == "storage_fault"}
+        assert monitor._captured == {}  # no output delivers: no capture time kept for one
         monkeypatch.setattr(monitor.store, "add", full)
         wait_for(lambda: monitor.backlog)
+        monkeypatch.setattr(service, "BACKLOG_MAX", 2)  # bounded: the oldest dropped, counted
+        lost = wait_for(lambda: monitor.status()["storage"]["events_lost"])
+        assert len(monitor.backlog) == 2 and lost >= 1
     finally:
         monitor.stop()  # a disk still full: the log keeps what could not be written
     lines = [r.getMessage() for r in caplog.records if r.name == "thermodepth.monitor"]

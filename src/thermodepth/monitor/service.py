@@ -54,6 +54,10 @@ CLOCK_LIMIT_S = 5.0
 SWEEP_LIMIT_S = 120.0
 OUTPUT_ERROR_EVERY_S = 60.0
 """An output whose tick keeps failing is logged (with its traceback) at most this often."""
+BACKLOG_MAX = 10_000
+"""Events the store could not take (a full disk) kept in memory for it, at most; past it the
+oldest is dropped and counted (``storage.events_lost``; its line is in the log). The same
+bound holds the capture times kept for outputs' delivery latencies."""
 
 
 def utc_of(time_s: float) -> str:
@@ -78,6 +82,7 @@ class Monitor:
         self.started_utc = utc_of(time.time())
         self.store = EventStore(config.storage.path / STORE_NAME)
         self.backlog: list[dict[str, Any]] = []  # events the store could not take yet
+        self.events_lost = 0  # ... and dropped, oldest first, past BACKLOG_MAX
         self.event_counts: Counter[tuple[str, str]] = Counter()
         self.latency_s: dict[str, deque[float]] = {
             "event_row": deque(maxlen=1000),
@@ -390,6 +395,9 @@ class Monitor:
             try:
                 event["id"] = self.store.add(event, outbox=[o.name for o in outbox])
             except sqlite3.Error as exc:
+                if len(self.backlog) >= BACKLOG_MAX:  # its line is in the log already
+                    self.backlog.pop(0)
+                    self.events_lost += 1
                 self.backlog.append(event)
                 why = (
                     f"event {event['rig']} {event['rule']} not written to {self.store.path} "
@@ -398,7 +406,10 @@ class Monitor:
             else:
                 if captured_s is not None:
                     self.latency_s["event_row"].append(time.time() - captured_s)
-                    self._captured[event["id"]] = captured_s
+                    if outbox:  # an output tells when it has it: the delivery's latency
+                        if len(self._captured) >= BACKLOG_MAX:
+                            del self._captured[next(iter(self._captured))]
+                        self._captured[event["id"]] = captured_s
         if why is not None:
             self.storage_problem(why)
         for output in outbox:
@@ -571,6 +582,7 @@ class Monitor:
                 "free_bytes": free_bytes(path),
                 "event_store_bytes": self.store.size_bytes(),
                 "events_not_stored": len(self.backlog),
+                "events_lost": self.events_lost,
                 "pictures_skipped": self.evidence.pictures_skipped,
                 "deleted": dict(self.retention.deleted),
                 "fault": self._storage_fault.raised,
