@@ -142,9 +142,7 @@ def test_evidence_by_event_id_and_nothing_by_a_path(running: Any, tmp_path: Path
 def test_live_pictures_trend_and_the_schema(running: Any) -> None:
     monitor, _ = running
     with client(monitor, headers=BEARER) as c:
-        overlay = wait_for(
-            lambda: (r := c.get("/api/rigs/a/overlay.jpg")).status_code == 200 and r, 10
-        )
+        overlay = wait_for(lambda: (r := c.get("/api/rigs/a/overlay.jpg")).status_code == 200 and r)
         assert (
             overlay.content.startswith(b"\xff\xd8")
             and overlay.headers["cache-control"] == "no-store"
@@ -171,8 +169,11 @@ def test_live_pictures_trend_and_the_schema(running: Any) -> None:
         assert schema["openapi"].startswith("3.")
         for path in ("/api/status", "/api/events", "/api/events/{id}", "/api/ack", "/healthz"):
             assert path in schema["paths"], path
-        status = c.get("/api/status").json()["rigs"][0]
-        assert status["health"] == "ok" and status["temp_range_c"] and "plate" in status["rois"]
+        # a busy machine can leave the rig stale a moment: its health waited for
+        status = wait_for(
+            lambda: (r := c.get("/api/status").json()["rigs"][0])["health"] == "ok" and r
+        )
+        assert status["temp_range_c"] and "plate" in status["rois"]
 
 
 def test_tls_with_a_certificate(tmp_path: Path) -> None:

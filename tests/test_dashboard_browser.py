@@ -166,7 +166,8 @@ def test_the_overview_shows_every_rig_live_and_an_alarm_as_it_comes(plant: Any) 
         assert first[0] == 640
         wait_for(lambda img=img, first=first: picture_sum(driver, img) not in (None, first))
     assert 60 < float(texts(driver, "section.card[data-rig=a] .hottest", "data-hottest")[0]) < 75
-    assert texts(driver, "section.card[data-rig=b] .state")[0].lower() == "ok"
+    # the healthy rig reads ok (a busy machine can leave it stale a moment: waited for)
+    wait_for(lambda: texts(driver, "section.card[data-rig=b] .state")[0].lower() == "ok")
 
 
 def test_acknowledge_on_the_rig_page_reaches_the_event_store_and_mqtt(plant: Any) -> None:

@@ -15,6 +15,7 @@ import pytest
 
 pytest.importorskip("rosbags", reason="ROS bags need the ros extra (rosbags)")
 
+from monitor_helpers import PATIENCE_S
 from thermodepth.errors import InputError
 from thermodepth.io.ros import (
     CAMERA_INFO,
@@ -375,14 +376,14 @@ def test_a_run_live_in_foxglove_read_as_its_websocket_client_reads_it() -> None:
             channels: dict[str, Any] = {}
             wanted = {FUSED["cloud"], FUSED["markers"], FUSED["temperature_ck"], TOPICS["thermal"]}
             while not wanted <= set(channels):  # each advertised when it first has a message
-                msg = json.loads(await asyncio.wait_for(ws.recv(), 10))
+                msg = json.loads(await asyncio.wait_for(ws.recv(), PATIENCE_S))
                 if msg["op"] == "advertise":
                     channels.update({c["topic"]: c for c in msg["channels"]})
             cloud = channels[FUSED["cloud"]]
             sub = {"op": "subscribe", "subscriptions": [{"id": 3, "channelId": cloud["id"]}]}
             await ws.send(json.dumps(sub))
             while True:
-                data = await asyncio.wait_for(ws.recv(), 10)
+                data = await asyncio.wait_for(ws.recv(), PATIENCE_S)
                 if isinstance(data, bytes) and data[0] == 1:  # a message's data
                     return channels, data
 
