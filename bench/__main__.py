@@ -17,6 +17,7 @@ BENCHMARKS = [
     "bench_batch",
     "bench_detection",
     "bench_monitor",
+    "bench_monitor_memory",
     "bench_dashboard",
     "bench_export",
     "bench_odometry",

@@ -307,7 +307,7 @@ async function healthPage() {
       <a href="/metrics">Prometheus metrics</a> · <a href="/api/openapi.json">API schema</a></p>
       <div class="grid">${rigs}</div><h3>Storage</h3><table>
       ${row("path", st.path)}${row("free", `${num(st.free_bytes / 1e9, 1)} GB`)}${row("event store", `${num(st.event_store_bytes / 1e6, 1)} MB`)}
-      ${row("events not yet stored", st.events_not_stored)}${row("deleted", `${st.deleted.continuous} recordings, ${st.deleted.clips} clips`)}
+      ${row("events not yet stored", st.events_not_stored)}${st.events_lost ? row("events lost (memory full)", st.events_lost) : ""}${row("deleted", `${st.deleted.continuous} recordings, ${st.deleted.clips} clips`)}
       ${row("storage fault", st.fault ? "raised" : "no")}</table>
       <h3>Latency, capture to alarm</h3><table>${Object.entries(s.latency_s).map(([k, v]) =>
         row(k.replace("_", " "), v.n ? `${num(v.median * 1e3, 1)} ms median, ${num(v.p99 * 1e3, 1)} ms p99 (${v.n})` : "–")).join("")}</table>
