@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 if TYPE_CHECKING:
     from ...pipeline import FusedFrame, Settings
     from ..config import MonitorConfig
-    from ..live import Picture
+    from ..live import Picture, VideoFrame
     from ..store import EventStore
     from ..workers import Worker
 
@@ -29,6 +29,9 @@ Acknowledge = Callable[[str, str, str], list[dict[str, Any]]]
 cannot be)."""
 Pictures = Callable[[str, str, "int | None"], "Picture | None"]
 """``picture(rig, what, width)``: a rig's live ``overlay`` (JPEG) or ``thermal`` (PNG)."""
+Videos = Callable[[str, str, float], "VideoFrame | None"]
+"""``video(rig, view, hz)``: a rig's latest ``overlay`` or ``thermal`` picture framed for a
+video stream playing at ``hz``."""
 
 
 class RigEntities(NamedTuple):
@@ -68,8 +71,8 @@ def entities_of(config: MonitorConfig) -> list[RigEntities]:
 class OutputContext:
     """What the monitor gives an output's builder: the config, the rigs, the event store (its
     outbox), how to acknowledge, the live pictures, whom to tell when an event has been
-    delivered (``delivered(event)``: the latency figures) and the rigs' status now
-    (``rig_status()``: ``/api/status``'s ``rigs``)."""
+    delivered (``delivered(event)``: the latency figures), the rigs' status now
+    (``rig_status()``: ``/api/status``'s ``rigs``) and their video pictures."""
 
     config: MonitorConfig
     rigs: list[RigEntities]
@@ -78,6 +81,7 @@ class OutputContext:
     picture: Pictures
     delivered: Callable[[dict[str, Any]], None]
     rig_status: Callable[[], list[dict[str, Any]]]
+    video: Videos
 
 
 class Output:
