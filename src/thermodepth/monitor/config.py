@@ -200,13 +200,14 @@ class RtspConfig(StrictSchema):
     """Each rig's live picture as H.264 over RTSP (:mod:`.outputs.rtsp`): ``listen``
     (``HOST:PORT``; beyond this machine only with ``allow_remote``), ``user`` and
     ``password_file`` (its first line: Basic authentication), ``fps``, ``bitrate_kbps`` (the
-    encoder's target)."""
+    encoder's target), ``max_viewers`` (sessions at once; one more is answered 503)."""
 
     listen: str = DEFAULT_RTSP
     user: str = Field(default="viewer", pattern=r"^[^:\s]+$")
     password_file: Path
     fps: float = Field(default=5.0, gt=0, le=VIDEO_MAX_FPS)
     bitrate_kbps: int = Field(default=2000, ge=100, le=50000)
+    max_viewers: int = Field(default=16, ge=1, le=1024)
     allow_remote: bool = False
 
     def address(self) -> tuple[str, int]:

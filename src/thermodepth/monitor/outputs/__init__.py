@@ -8,6 +8,7 @@ module              what
 :mod:`.homeassistant`  Home Assistant's MQTT discovery (with MQTT)
 :mod:`.opcua`       an OPC UA server: readings, alarm states and events
 :mod:`.modbus`      a Modbus TCP server: readings, health, alarm states, acknowledging coils
+:mod:`.rtsp`        an RTSP server: each rig's live video as H.264
 ==================  ===========================================================================
 
 :data:`OUTPUT_BUILDERS` makes each from its section of the config (``None``: not asked for),
@@ -55,6 +56,14 @@ def _modbus(config: MonitorConfig, context: OutputContext) -> Output | None:
     return ModbusOutput(config.modbus, context)
 
 
+def _rtsp(config: MonitorConfig, context: OutputContext) -> Output | None:
+    if config.rtsp is None:
+        return None
+    from .rtsp import RtspOutput
+
+    return RtspOutput(config.rtsp, context)
+
+
 def _describe_mqtt(config: MonitorConfig) -> str | None:
     from .mqtt import describe
 
@@ -73,10 +82,17 @@ def _describe_modbus(config: MonitorConfig) -> str | None:
     return None if config.modbus is None else describe(config.modbus)
 
 
+def _describe_rtsp(config: MonitorConfig) -> str | None:
+    from .rtsp import describe
+
+    return None if config.rtsp is None else describe(config.rtsp)
+
+
 OUTPUT_BUILDERS: dict[str, OutputKind] = {
     "mqtt": OutputKind(_mqtt, _describe_mqtt),
     "opcua": OutputKind(_opcua, _describe_opcua),
     "modbus": OutputKind(_modbus, _describe_modbus),
+    "rtsp": OutputKind(_rtsp, _describe_rtsp),
 }
 """Each output by the config section that asks for it."""
 
