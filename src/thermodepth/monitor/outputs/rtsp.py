@@ -37,10 +37,10 @@ from ..workers import Worker
 from .base import Output, OutputContext, RigEntities
 
 INSTALL = (
-    "the monitor's RTSP server needs GStreamer's RTSP server and PyGObject: pip install "
-    "'thermodepth[video]' (building it needs libgirepository1.0-dev, libcairo2-dev, "
-    "pkg-config) or Debian's python3-gi, with gir1.2-gst-rtsp-server-1.0 and "
-    "gstreamer1.0-plugins-base, -good and -bad"
+    "rtsp: the monitor's RTSP server needs PyGObject and GStreamer's RTSP server: Debian's "
+    "gir1.2-gst-rtsp-server-1.0, gstreamer1.0-plugins-base, gstreamer1.0-plugins-good, "
+    "gstreamer1.0-plugins-bad, and python3-gi or pip install 'thermodepth[video]' (which "
+    "builds PyGObject: libgirepository1.0-dev, libcairo2-dev, pkg-config)"
 )
 ENCODERS = {
     "openh264enc": (
