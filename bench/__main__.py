@@ -18,6 +18,7 @@ BENCHMARKS = [
     "bench_detection",
     "bench_monitor",
     "bench_dashboard",
+    "bench_video",
     "bench_export",
     "bench_odometry",
     "bench_map",
