@@ -69,7 +69,7 @@ def mjpeg_reader(url: str, seconds: float, got: list[tuple[float, float, float]]
                     break
                 data = buf[head_end + 4 : head_end + 4 + size]
                 buf = buf[head_end + 4 + size + 2 :]
-                img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+                img = np.asarray(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR))
                 got.append((time.time(), float(fields["X-Capture-Time"]), scene_mean(img)))
             if time.monotonic() > end:
                 return

@@ -27,11 +27,11 @@ from thermodepth.compensation import preset
 from thermodepth.compensation.files import save_model
 from thermodepth.errors import InputError
 from thermodepth.frames import FfcState, Telemetry, match_of
+from thermodepth.monitor import storage
 from thermodepth.monitor.config import FailsafeConfig, StorageConfig, load_config
 from thermodepth.monitor.evidence import PackedMatch, PreTrigger
 from thermodepth.monitor.failsafe import Fault, SensorWatch
 from thermodepth.monitor.rig import PacedSource
-from thermodepth.monitor import storage
 from thermodepth.monitor.storage import ContinuousRecorder, Retention, stamp
 from thermodepth.monitor.store import MIGRATIONS, EventStore
 from thermodepth.monitor.systemd import notify, watchdog_interval_s
@@ -155,7 +155,7 @@ def test_monitor_check_says_what_the_config_sets_up(tmp_path: Path, cli_process:
         f"storage {tmp_path / 'store'}: clips of events, 1 s before and 1 s after; kept 30 "
         "days, 1 GB left free",
         "HTTP on 127.0.0.1:0",
-        "no outputs (MQTT, OPC UA, Modbus): the dashboard and the log only",
+        "no outputs (MQTT, OPC UA, Modbus, RTSP): the dashboard and the log only",
         "log level info",
         f"{path}: OK",
     ]
