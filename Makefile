@@ -13,7 +13,7 @@ OUT    ?= demo-out
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,realsense,distributed,mqtt,viewer,boson,infiray,monitor,opcua,modbus,ros,foxglove,map]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,realsense,distributed,mqtt,viewer,boson,infiray,monitor,opcua,modbus,video,ros,foxglove,map]'
 	@touch $@
 
 venv: $(STAMP)

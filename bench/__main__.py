@@ -19,6 +19,7 @@ BENCHMARKS = [
     "bench_monitor",
     "bench_monitor_memory",
     "bench_dashboard",
+    "bench_video",
     "bench_export",
     "bench_odometry",
     "bench_map",

@@ -155,7 +155,7 @@ def test_monitor_check_says_what_the_config_sets_up(tmp_path: Path, cli_process:
         f"storage {tmp_path / 'store'}: clips of events, 1 s before and 1 s after; kept 30 "
         "days, 1 GB left free",
         "HTTP on 127.0.0.1:0",
-        "no outputs (MQTT, OPC UA, Modbus): the dashboard and the log only",
+        "no outputs (MQTT, OPC UA, Modbus, RTSP, notifications): the dashboard and the log only",
         "log level info",
         f"{path}: OK",
     ]

@@ -52,7 +52,12 @@ def describe_config(config: MonitorConfig) -> list[str]:
         else f"HTTP on {http.listen}" + (" with a bearer token" if http.token_file else "")
     )
     outputs = describe_outputs(config)
-    lines.extend(outputs or ["no outputs (MQTT, OPC UA, Modbus): the dashboard and the log only"])
+    lines.extend(
+        outputs
+        or [
+            "no outputs (MQTT, OPC UA, Modbus, RTSP, notifications): the dashboard and the log only"
+        ]
+    )
     rig_levels = ", ".join(f"{k} {v}" for k, v in config.log.rigs.items())
     lines.append(f"log level {config.log.level}" + (f" ({rig_levels})" if rig_levels else ""))
     return lines

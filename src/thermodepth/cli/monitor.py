@@ -30,7 +30,8 @@ def monitor_cmd(
     """Watch rigs day and night (docs/monitor.md): each rig reopened when its camera fails,
     sensor faults raised when data cannot be trusted, every event kept with its evidence
     (a clip, an overlay, a point cloud), storage bounded, health on HTTP, MQTT, OPC UA and
-    Modbus. Runs until SIGTERM or Ctrl-C; SIGHUP reloads the config."""
+    Modbus, live video as MJPEG and RTSP. Runs until SIGTERM or Ctrl-C; SIGHUP reloads the
+    config."""
     from ..app.monitor import describe_config, run_monitor
     from ..monitor import load_config
 

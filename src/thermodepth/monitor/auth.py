@@ -3,8 +3,10 @@
 With a token (``http.token_file``, else ``THERMODEPTH_HTTP_TOKEN``), every route but
 ``/healthz``, the login page and its assets wants it: the API and ``/metrics`` as a bearer
 header (``Authorization: Bearer TOKEN``), the pages through a login form (the token and the
-operator's name) that sets a session cookie (HttpOnly, SameSite=Strict, Secure over TLS).
-Without a token (a monitor listening on loopback only) everything is open.
+operator's name) that sets a session cookie (HttpOnly, SameSite=Strict, Secure over TLS), the
+live pictures and streams also as a query (``?token=``: the server asks for it only there,
+:data:`~.http.LIVE_PICTURE`). Without a token (a monitor listening on loopback only)
+everything is open.
 
 Every request that changes something (a POST) must carry the session's CSRF token in
 ``X-CSRF-Token`` and a JSON body (``Content-Type: application/json``, which another site's
@@ -30,8 +32,9 @@ SESSION_S = 12 * 3600.0
 
 @dataclass(frozen=True)
 class Identity:
-    """Who asks: by ``bearer`` token, a login ``session`` (the operator's ``name``) or
-    ``open`` (no token set); ``csrf``: the token its changes must carry (None: none needed)."""
+    """Who asks: by ``bearer`` token, the token as a ``query``, a login ``session`` (the
+    operator's ``name``) or ``open`` (no token set); ``csrf``: the token its changes must
+    carry (None: none needed)."""
 
     kind: str
     name: str | None = None
@@ -59,12 +62,15 @@ class Auth:
             given.encode(), f"Bearer {self.token}".encode()
         )
 
-    def identity(self, headers: Any, cookies: Any) -> Identity | None:
-        """Who a request is (None: nobody allowed)."""
+    def identity(self, headers: Any, cookies: Any, query: str | None = None) -> Identity | None:
+        """Who a request is (None: nobody allowed); ``query``: the token given as a query,
+        where the server takes one."""
         if self.token is None:
             return Identity("open", None, self.open_csrf)
         if self._bearer(headers):
             return Identity("bearer")
+        if query is not None and hmac.compare_digest(query.encode(), self.token.encode()):
+            return Identity("query")
         session = cookies.get(COOKIE)
         if session:
             with self._lock:

@@ -52,7 +52,7 @@ from ..alarms import RAISED
 from ..pipeline import MqttSettings
 from ..sinks.mqtt import MqttConnection, MqttTarget, default_client_id
 from .config import MONITOR
-from .live import Picture, Trend, encode
+from .live import Picture, Trend, VideoFrame, encode
 from .logs import logger
 from .outputs.mqtt import SNAPSHOTS, STATUS_EVERY_S
 from .storage import free_bytes
@@ -129,6 +129,7 @@ class CentralDashboard:
         self.event_counts: Counter[tuple[str, str]] = Counter()
         self.acks_sent = 0
         self._lock = threading.Lock()
+        self._videos: dict[tuple[str, str], tuple[bytes, VideoFrame]] = {}  # decoded once
         self._answers: dict[str, queue.Queue[dict[str, Any]]] = {}
         self._quiet: dict[str, int] = {}  # events known from a recent list only: their ids
         self._ack_locks: dict[str, threading.Lock] = {}
@@ -442,6 +443,27 @@ class CentralDashboard:
         if img is not None and width is not None and width < img.shape[1]:
             data = encode(img, "jpeg" if leaf.endswith(".jpg") else "png", width)
         return Picture(data, None)
+
+    def video(self, rig: str, view: str, hz: float) -> VideoFrame | None:
+        """A rig's latest published ``overlay`` or ``thermal`` picture for a video stream (as
+        published: at ``mqtt.snapshots_hz``, without the monitor's title and colour scale),
+        decoded once per picture."""
+        leaf = next(k for k, (w, _) in SNAPSHOTS.items() if w == view)
+        with self._lock:
+            r = self.rigs.get(rig)
+            data = None if r is None else r.pictures.get(leaf)
+            kept = self._videos.get((rig, view))
+        if data is None:
+            return None
+        if kept is not None and kept[0] is data:
+            return kept[1]
+        img = _decoded(data)
+        if img is None:
+            return None
+        made = VideoFrame(img, None)
+        with self._lock:
+            self._videos[(rig, view)] = (data, made)
+        return made
 
     def trend(self, rig: str) -> list[dict[str, Any]] | None:
         with self._lock:

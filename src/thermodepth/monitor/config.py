@@ -185,6 +185,66 @@ class ModbusConfig(StrictSchema):
         return listen_address(self.listen, DEFAULT_MODBUS)
 
 
+# -- live video (MJPEG over HTTP, RTSP) -------------------------------------------------------
+
+DEFAULT_RTSP = "127.0.0.1:8554"
+VIDEO_MAX_FPS = 30.0
+
+
+class MjpegConfig(StrictSchema):
+    """Each rig's live picture as MJPEG over the HTTP server (``/api/rigs/RIG/stream.mjpeg``,
+    :mod:`.http`): ``fps`` (frames sent a second to each client), ``max_streams`` (streams at
+    once over all rigs; one more is answered 503)."""
+
+    fps: float = Field(default=5.0, gt=0, le=VIDEO_MAX_FPS)
+    max_streams: int = Field(default=8, ge=1, le=256)
+
+
+class RtspConfig(StrictSchema):
+    """Each rig's live picture as H.264 over RTSP (:mod:`.outputs.rtsp`): ``listen``
+    (``HOST:PORT``; beyond this machine only with ``allow_remote``), ``user`` and
+    ``password_file`` (its first line: Basic authentication), ``fps``, ``bitrate_kbps`` (the
+    encoder's target), ``max_viewers`` (sessions at once; one more is answered 503)."""
+
+    listen: str = DEFAULT_RTSP
+    user: str = Field(default="viewer", pattern=r"^[^:\s]+$")
+    password_file: Path
+    fps: float = Field(default=5.0, gt=0, le=VIDEO_MAX_FPS)
+    bitrate_kbps: int = Field(default=2000, ge=100, le=50000)
+    max_viewers: int = Field(default=16, ge=1, le=1024)
+    allow_remote: bool = False
+
+    def address(self) -> tuple[str, int]:
+        """(host, port) of ``listen``; ValueError if it is not ``HOST:PORT``."""
+        return listen_address(self.listen, DEFAULT_RTSP)
+
+
+def _rtsp_problems(rtsp: RtspConfig | None) -> list[str]:
+    """What is wrong with the RTSP section: its address, who could reach it, its password."""
+    if rtsp is None:
+        return []
+    problems = []
+    try:
+        host = rtsp.address()[0]
+    except ValueError as exc:
+        problems.append(f"rtsp.{exc}")
+    else:
+        if not loopback_host(host) and not rtsp.allow_remote:
+            problems.append(
+                f"rtsp.listen: {rtsp.listen} is reachable from other machines (RTSP sends its "
+                "password and pictures unencrypted): set rtsp.allow_remote: true, or listen on "
+                "127.0.0.1"
+            )
+    try:
+        read_token(rtsp.password_file, "password")
+    except InputError as exc:
+        problems.append(f"rtsp.password_file: {exc}")
+    return problems
+
+
+# -- end of live video --------------------------------------------------------------------------
+
+
 class FailsafeConfig(StrictSchema):
     """When a rig's data cannot be trusted (a ``sensor_fault``): ``vox_margin_c`` beyond the
     VOx range its compensation was fitted on; the shutter closed ``shutter_max_s`` on end, or
@@ -222,6 +282,8 @@ class MonitorConfig(StrictSchema):
     opcua: OpcUaConfig | None = None
     modbus: ModbusConfig | None = None
     notify: list[NotifyConfig] = Field(default_factory=list)
+    mjpeg: MjpegConfig = MjpegConfig()  # live video
+    rtsp: RtspConfig | None = None  # live video
     failsafe: FailsafeConfig = FailsafeConfig()
     log: LogConfig = LogConfig()
 
@@ -265,6 +327,10 @@ def _resolved(config: MonitorConfig, base: Path) -> MonitorConfig:
         )
     if config.notify:
         update["notify"] = [_notify_resolved(target, base) for target in config.notify]
+    if config.rtsp is not None:  # live video
+        update["rtsp"] = config.rtsp.model_copy(
+            update={"password_file": base / config.rtsp.password_file}
+        )
     if config.mqtt is not None:
         update["mqtt"] = config.mqtt.model_copy(
             update={
@@ -356,7 +422,7 @@ def config_problems(config: MonitorConfig) -> list[str]:
     """Every problem of a valid-looking config, one line each: rig names twice, sources,
     settings files and the calibration and compensation files they name, the listen address,
     a token where one is needed, the broker's URL and password, OPC UA's users, Modbus's
-    address and register room, the log's rigs."""
+    address and register room, RTSP's address and password, the log's rigs."""
     problems = []
     twice = repeated(r.name for r in config.rigs)
     if twice:
@@ -376,6 +442,7 @@ def config_problems(config: MonitorConfig) -> list[str]:
     problems.extend(_opcua_problems(config.opcua))
     problems.extend(_modbus_problems(config))
     problems.extend(notify_problems(config))
+    problems.extend(_rtsp_problems(config.rtsp))  # live video
     names = {r.name for r in config.rigs}
     problems.extend(
         f"log.rigs.{rig}: no rig of that name ({', '.join(sorted(names))})"
@@ -439,14 +506,15 @@ def _modbus_problems(config: MonitorConfig) -> list[str]:
     return problems + room_problems(config)
 
 
-def read_token(path: Path) -> str:
-    """The bearer token: the file's first line (InputError if unreadable or empty)."""
+def read_token(path: Path, what: str = "token") -> str:
+    """The bearer token (or the ``what`` a file holds): the file's first line (InputError if
+    unreadable or empty)."""
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if not lines or not lines[0].strip():
-        raise InputError(f"{path}: empty (the first line is the token)")
+        raise InputError(f"{path}: empty (the first line is the {what})")
     return lines[0].strip()
 
 

@@ -25,6 +25,9 @@ route                                      what
                                            while the clip is still being recorded
 ``GET /api/rigs/RIG/overlay.jpg``,         the rig's latest overlay and thermal image
 ``thermal.png``                            (``width``: scaled down)
+``GET /api/rigs/RIG/stream.mjpeg``         its live video as MJPEG (``view``: ``overlay``
+                                           or ``thermal``), ``mjpeg.fps`` frames a second;
+                                           503 beyond ``mjpeg.max_streams`` at once
 ``GET /api/rigs/RIG/trend``                its readings over the last hour
 ``POST /api/ack``                          acknowledge ``{"rig", "rule", "by"}``: 200 with
                                            its events, 404 no such rig or rule, 409 not
@@ -41,15 +44,20 @@ Events and their evidence are addressed by id, never by a path.
 Every route is guarded by one middleware (:class:`Guard`) that denies by default: only
 :data:`PUBLIC` (``/healthz``, the login page and its two static files) answer without the
 token. A request without it gets 401 (a page: with a link to the login form); one with a
-wrong token, or a session that has expired, gets 401 saying so.
+wrong token, or a session that has expired, gets 401 saying so. The live pictures and streams
+(:data:`LIVE_PICTURE`) also take the token as a query (``?token=``), for cameras' clients
+that cannot send a header (Home Assistant's MJPEG camera); they only read.
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
+import re
 import socket
 import tempfile
+import threading
 import zipfile
 from importlib.resources import files
 from pathlib import Path
@@ -60,7 +68,8 @@ from .. import __version__
 from ..errors import InputError
 from ..io.measurements import jsonable
 from .auth import COOKIE, SESSION_S, Auth, Identity
-from .config import HttpConfig, read_token
+from .config import HttpConfig, MjpegConfig, read_token
+from .live import VIEWS
 from .logs import logger
 from .supervisor import AckRefusedError, ClipNotReadyError
 from .workers import Worker
@@ -70,7 +79,7 @@ if TYPE_CHECKING:
     from starlette.requests import Request
     from starlette.responses import Response
 
-    from .live import Picture
+    from .live import Picture, VideoFrame
 
 INSTALL = "the monitor's HTTP server needs the monitor extra: pip install 'thermodepth[monitor]'"
 WEB = files("thermodepth.monitor") / "web"
@@ -82,7 +91,13 @@ EVIDENCE = {"snapshot.png": "image/png", "cloud.ply": "application/octet-stream"
 PICTURES = {"overlay.jpg": ("overlay", "image/jpeg"), "thermal.png": ("thermal", "image/png")}
 PUBLIC = frozenset({"/healthz", "/login", "/static/login.js", "/static/style.css"})
 """The only paths that answer without the token (probes, and the way to log in)."""
+LIVE_PICTURE = re.compile(r"^/api/rigs/.+/(stream\.mjpeg|overlay\.jpg|thermal\.png)$")
+"""The paths whose GET takes the token as a query too (``?token=``): read-only pictures."""
 HTTP_LIMIT_S = 30.0
+BOUNDARY = "thermodepth-frame"
+FIRST_FRAME_S = 10.0
+"""How long a new stream waits for its rig's first picture (a running rig's comes within a
+quarter of a second of being asked for) before it answers 404."""
 
 
 class Monitor(Protocol):
@@ -110,6 +125,8 @@ class Monitor(Protocol):
     def evidence_of(self, event: dict[str, Any]) -> list[str]: ...
 
     def picture(self, rig: str, what: str, width: int | None) -> Picture | None: ...
+
+    def video(self, rig: str, view: str, hz: float) -> VideoFrame | None: ...
 
     def trend(self, rig: str) -> list[dict[str, Any]] | None: ...
 
@@ -156,7 +173,10 @@ class Guard:
             await self.app(scope, receive, send)
             return
         conn = HTTPConnection(scope)
-        who = self.auth.identity(conn.headers, conn.cookies)
+        query = None
+        if scope["method"] == "GET" and LIVE_PICTURE.match(scope["path"]):
+            query = conn.query_params.get("token")
+        who = self.auth.identity(conn.headers, conn.cookies, query)
         if who is None and scope["path"] not in PUBLIC:
             await refusal(conn, self.auth)(scope, receive, send)
             return
@@ -170,7 +190,9 @@ def refusal(conn: Any, auth: Auth) -> Response:
     from starlette.responses import HTMLResponse
 
     headers = conn.headers
-    if headers.get("authorization"):
+    if headers.get("authorization") or (
+        LIVE_PICTURE.match(conn.url.path) and "token" in conn.query_params
+    ):
         why, challenge = "wrong token", 'Bearer realm="thermodepth", error="invalid_token"'
     elif conn.cookies.get(COOKIE):
         why, challenge = "your session has ended: log in again", 'Bearer realm="thermodepth"'
@@ -189,19 +211,56 @@ def refusal(conn: Any, auth: Auth) -> Response:
     return response
 
 
-def build_app(monitor: Monitor, auth: Auth) -> Starlette:
-    """The Starlette application of the routes (module docstring)."""
+class Streams:
+    """The MJPEG streams of one server: at most ``config.max_streams`` at once (:meth:`enter`
+    says whether one more may begin), each ended once ``closing`` is set (the server stops)."""
+
+    def __init__(self, config: MjpegConfig) -> None:
+        self.config = config
+        self.closing = threading.Event()
+        self.open = 0
+        self.refused = 0
+        self._lock = threading.Lock()
+
+    def enter(self) -> bool:
+        with self._lock:
+            if self.open >= self.config.max_streams:
+                self.refused += 1
+                return False
+            self.open += 1
+            return True
+
+    def leave(self) -> None:
+        with self._lock:
+            self.open -= 1
+
+    def status(self) -> dict[str, Any]:
+        return {"open": self.open, "max": self.config.max_streams, "refused": self.refused}
+
+
+def _part(frame: VideoFrame) -> bytes:
+    """One JPEG of a multipart stream, its boundary first."""
+    head = f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(frame.jpeg)}\r\n"
+    if frame.time_s is not None:
+        head += f"X-Capture-Time: {frame.time_s:.3f}\r\n"
+    return head.encode() + b"\r\n" + frame.jpeg + b"\r\n"
+
+
+def build_app(monitor: Monitor, auth: Auth, streams: Streams | None = None) -> Starlette:
+    """The Starlette application of the routes (module docstring); ``streams``: its MJPEG
+    streams (default: ``mjpeg``'s defaults)."""
     from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
     from starlette.applications import Starlette
     from starlette.background import BackgroundTask
     from starlette.concurrency import run_in_threadpool
-    from starlette.responses import FileResponse, HTMLResponse, Response
+    from starlette.responses import FileResponse, HTMLResponse, Response, StreamingResponse
     from starlette.routing import Mount, Route
     from starlette.schemas import SchemaGenerator
     from starlette.staticfiles import StaticFiles
 
     from .metrics import collector
 
+    mjpeg = streams or Streams(MjpegConfig())
     registry = CollectorRegistry()
     registry.register(collector(monitor.status))
     schemas = SchemaGenerator(
@@ -367,6 +426,61 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
             headers["X-Capture-Time"] = f"{found.time_s:.3f}"
         return Response(found.data, media_type=media, headers=headers)
 
+    class Stream(StreamingResponse):
+        """A stream that gives its place back however it ends (the client gone, the server
+        stopping)."""
+
+        async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+            try:
+                await super().__call__(scope, receive, send)
+            finally:
+                mjpeg.leave()
+
+    async def stream(request: Request) -> Response:
+        """
+        parameters:
+          - {name: view, in: query, schema: {type: string, enum: [overlay, thermal],
+             default: overlay}}
+          - {name: token, in: query, description: the token, for clients that cannot send
+             a header, schema: {type: string}}
+        responses:
+          200: {description: "the rig's live video: multipart/x-mixed-replace of JPEG
+            pictures, mjpeg.fps a second (X-Frame-Rate), each with its title and colour scale
+            and X-Capture-Time; each client gets the latest picture when it can take one"}
+          400: {description: a bad view}
+          404: {description: no such rig, or no frame yet}
+          503: {description: as many streams as mjpeg.max_streams are open}
+        """
+        rig, view = request.path_params["rig"], request.query_params.get("view", "overlay")
+        if view not in VIEWS:
+            return _error(f"view: expected one of {', '.join(VIEWS)}", 400)
+        fps = mjpeg.config.fps
+        loop = asyncio.get_running_loop()
+        end = loop.time() + FIRST_FRAME_S
+        while await run_in_threadpool(monitor.video, rig, view, fps) is None:
+            if loop.time() > end:
+                return _error("no such rig, or no frame yet", 404)
+            await asyncio.sleep(0.1)
+        if not mjpeg.enter():
+            busy = _error(f"{mjpeg.config.max_streams} streams are open (mjpeg.max_streams)", 503)
+            busy.headers["Retry-After"] = "10"
+            return busy
+
+        async def parts() -> Any:
+            due = loop.time()
+            while not mjpeg.closing.is_set():
+                frame = await run_in_threadpool(monitor.video, rig, view, fps)
+                if frame is not None:
+                    # sent when the client can take it (the server waits while its socket is
+                    # full): a slow client skips pictures, nothing queues for it
+                    yield await run_in_threadpool(_part, frame)
+                due = max(due + 1.0 / fps, loop.time())
+                await asyncio.sleep(due - loop.time())
+
+        headers = {"Cache-Control": "no-store", "X-Frame-Rate": f"{fps:g}"}
+        return Stream(parts(), media_type=f"multipart/x-mixed-replace; boundary={BOUNDARY}",
+                      headers=headers)  # fmt: skip
+
     async def trend(request: Request) -> Response:
         """
         responses:
@@ -460,6 +574,7 @@ def build_app(monitor: Monitor, auth: Auth) -> Starlette:
         Route("/api/events/{id:int}", event),
         Route("/api/events/{id:int}/{what}", evidence),
         Route("/api/rigs/{rig:path}/trend", trend),  # a central dashboard's rigs: EDGE/RIG
+        Route("/api/rigs/{rig:path}/stream.mjpeg", stream),
         Route("/api/rigs/{rig:path}/{what}", picture),
         Route("/api/ack", ack, methods=["POST"]),
         Route("/api/retire", retire, methods=["POST"]),
@@ -477,13 +592,16 @@ class HttpServer:
     it fails; over TLS when ``http.tls_cert`` and ``tls_key`` are given); ``start`` binds the
     address first, so that one taken is one InputError line."""
 
-    def __init__(self, monitor: Monitor, config: HttpConfig) -> None:
+    def __init__(
+        self, monitor: Monitor, config: HttpConfig, mjpeg: MjpegConfig | None = None
+    ) -> None:
         try:
             import uvicorn  # noqa: F401
 
             token = None if config.token_file is None else read_token(config.token_file)
             self.tls = config.tls_cert is not None
-            self.app = build_app(monitor, Auth.from_env(token, secure=self.tls))
+            self.streams = Streams(mjpeg or MjpegConfig())
+            self.app = build_app(monitor, Auth.from_env(token, secure=self.tls), self.streams)
         except ImportError:
             raise InputError(INSTALL) from None
         self.config = config
@@ -537,6 +655,7 @@ class HttpServer:
 
     def stop(self, reason: str = "stopped") -> None:
         self.worker.stopping.set()
+        self.streams.closing.set()  # the streams end, so that the server's end need not wait
         if self.server is not None:
             self.server.should_exit = True
         self.worker.stop()

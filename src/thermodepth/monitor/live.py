@@ -6,8 +6,9 @@ hour.
 
 The depth grid of a frame is sampled on the rig's own thread (the registration is not shared
 between threads), only while someone looks (:meth:`LiveView.wanted` in the last
-:data:`WATCH_S`) and at most :data:`LIVE_HZ` a second; a picture is drawn once per frame and
-size, however many screens ask for it.
+:data:`WATCH_S`) and at most :data:`LIVE_HZ` a second, or as often as a video stream that
+plays asks (:meth:`LiveView.video`); a picture is drawn once per frame and size, however
+many screens ask for it, a video frame once per frame and view, however many streams.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import time
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import cv2
@@ -159,11 +161,14 @@ LEGEND_PX = 150
 TITLE_PX = 26
 
 
-def framed(img: NDArray[np.uint8], range_c: tuple[float, float], title: str) -> NDArray[np.uint8]:
+def framed(
+    img: NDArray[np.uint8], range_c: tuple[float, float], title: str, reasons: bool = True
+) -> NDArray[np.uint8]:
     """A picture with what it needs to be read alone (an event's snapshot, a video stream):
     ``title`` above it, and beside it the colour scale over ``range_c`` (C) with its ticks
-    and the tints of the pixels without a temperature (:data:`~thermodepth.figures.NO_TEMPERATURE`),
-    BGR uint8, :data:`TITLE_PX` taller and :data:`LEGEND_PX` wider than ``img``."""
+    and (``reasons``: an overlay's) the tints of the pixels without a temperature
+    (:data:`~thermodepth.figures.NO_TEMPERATURE`), BGR uint8, :data:`TITLE_PX` taller and
+    :data:`LEGEND_PX` wider than ``img``."""
     from ..figures import NO_TEMPERATURE
 
     h, w = img.shape[:2]
@@ -181,7 +186,7 @@ def framed(img: NDArray[np.uint8], range_c: tuple[float, float], title: str) -> 
         cv2.line(out, (x0 + 18, y), (x0 + 22, y), WHITE, 1)
         cv2.putText(out, f"{t:.0f} C", (x0 + 26, y + 5), FONT, 0.45, WHITE, 1, cv2.LINE_AA)
     y = bar_top + bar_h + 18
-    for _, words, tint, striped in NO_TEMPERATURE:
+    for _, words, tint, striped in NO_TEMPERATURE if reasons else ():
         swatch = np.zeros((12, 18, 3), np.uint8)
         swatch[:] = _bgr(np.asarray(tint, np.float32))
         if striped:
@@ -235,6 +240,45 @@ class Picture:
     time_s: float | None
 
 
+VIEWS = ("overlay", "thermal")
+"""What a video stream shows (:meth:`LiveView.video`)."""
+
+
+@dataclass(frozen=True)
+class VideoFrame:
+    """A video stream's picture: ``image`` (BGR uint8, H x W x 3; a monitor's is framed: a
+    title with the frame's time, the colour scale beside it) and its frame's capture time (s,
+    as :class:`Picture`'s)."""
+
+    image: NDArray[np.uint8]
+    time_s: float | None
+
+    @cached_property
+    def jpeg(self) -> bytes:
+        """The image as JPEG, encoded once however many streams send it."""
+        return encode(self.image, "jpeg")
+
+
+def video_size(
+    depth_wh: tuple[int, int], thermal_wh: tuple[int, int], view: str
+) -> tuple[int, int]:
+    """The size (W, H, pixels) of a video stream's pictures for cameras of these sizes: the
+    overlay on the depth grid, or the thermal image 4 times larger, each with its title and
+    colour scale (:func:`framed`)."""
+    w, h = depth_wh if view == "overlay" else (4 * thermal_wh[0], 4 * thermal_wh[1])
+    return w + LEGEND_PX, h + TITLE_PX
+
+
+def time_label(time_s: float | None) -> str:
+    """A frame's capture time as a picture's title says it: local wall-clock time for a
+    live rig's (Unix) time, else seconds."""
+    if time_s is None:
+        return ""
+    if time_s > 1e9:  # Unix time: a live rig, or a recording replayed at its pace
+        return time.strftime("%Y-%m-%d %H:%M:%S %Z", time.localtime(time_s))
+    return f"{time_s:.2f} s"
+
+
 @dataclass
 class Trend:
     """A rig's readings, one every :data:`TREND_EVERY_S` over the last :data:`TREND_S`: each
@@ -263,10 +307,11 @@ class LiveView:
     range_c: tuple[float, float] | None = None
     frame: FusedFrame | None = None
     marked: dict[str, str] = field(default_factory=dict)
-    wanted_until: float = 0.0
     last_s: float = 0.0
     trend: Trend = field(default_factory=Trend)
+    _wanted: dict[float, float] = field(default_factory=dict)  # a rate (Hz): until when
     _cache: dict[tuple[int, str, int | None], Picture] = field(default_factory=dict)
+    _videos: dict[str, VideoFrame] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     def fused(self, fused: FusedFrame, alarms: AlarmTracker | None = None) -> None:
@@ -278,7 +323,9 @@ class LiveView:
             hot = fused.hotspots[0].max_c if fused.hotspots else None
             rois = {r.name: (r.max_c if r.n else None) for r in fused.rois}
             self.trend.add(fused.thermal_time_s, hot, rois)
-        if now > self.wanted_until or now - self.last_s < 1.0 / LIVE_HZ:
+        with self._lock:
+            rates = [hz for hz, until in self._wanted.items() if until >= now]
+        if not rates or now - self.last_s < 1.0 / max(rates):
             return
         self.last_s = now
         _ = fused.on_depth
@@ -288,10 +335,13 @@ class LiveView:
         with self._lock:
             self.frame, self.marked = fused, marked
             self._cache.clear()
+            self._videos.clear()
 
-    def wanted(self) -> None:
-        """Someone looks: keep the pictures coming for WATCH_S."""
-        self.wanted_until = time.monotonic() + WATCH_S
+    def wanted(self, hz: float = LIVE_HZ) -> None:
+        """Someone looks: keep the pictures coming for WATCH_S, ``hz`` a second (at least
+        LIVE_HZ)."""
+        with self._lock:
+            self._wanted[max(hz, LIVE_HZ)] = time.monotonic() + WATCH_S
 
     def picture(self, what: str, width: int | None = None) -> Picture | None:
         """The latest ``overlay`` (JPEG) or ``thermal`` (PNG) picture, None before the first
@@ -313,3 +363,24 @@ class LiveView:
             if self.frame is frame:
                 self._cache[key] = picture
         return picture
+
+    def video(self, view: str, title: str, hz: float) -> VideoFrame | None:
+        """The latest ``overlay`` or ``thermal`` picture (:data:`VIEWS`) framed for a video
+        stream that plays at ``hz``: ``title`` and the frame's time above it, the colour scale
+        beside it (:func:`video_size`); None before the first frame someone looked at."""
+        self.wanted(hz)
+        with self._lock:
+            frame, marked, cached = self.frame, self.marked, self._videos.get(view)
+        if frame is None or cached is not None:
+            return cached
+        range_c = self.range_c or (15.0, 80.0)
+        heading = f"{title}  {time_label(frame.thermal_time_s)}".strip()
+        if view == "overlay":
+            img = framed(overlay_image(frame, range_c, self.rois, marked), range_c, heading)
+        else:
+            img = framed(thermal_image(frame, range_c), range_c, heading, reasons=False)
+        made = VideoFrame(img, frame.thermal_time_s)
+        with self._lock:
+            if self.frame is frame:
+                self._videos[view] = made
+        return made

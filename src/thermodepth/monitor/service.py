@@ -37,7 +37,7 @@ from ..pipeline import FusedFrame
 from .config import MONITOR, MonitorConfig, RigConfig
 from .evidence import Evidence
 from .failsafe import STORAGE_FAULT, Fault
-from .live import Picture
+from .live import Picture, VideoFrame
 from .logs import apply_levels, logger
 from .outputs import OUTPUT_BUILDERS, Output, OutputContext, RigEntities, build_outputs
 from .rig import RigSink, quantiles
@@ -127,6 +127,7 @@ class Monitor:
             lambda: self.status()["rigs"],
             self.evidence_of,
             self._snapshot_file,
+            self.video,
         )
 
     def entities(self) -> list[RigEntities]:
@@ -180,7 +181,7 @@ class Monitor:
             if self.config.http.listen is not None:
                 from .http import HttpServer
 
-                self.http = HttpServer(self, self.config.http)
+                self.http = HttpServer(self, self.config.http, self.config.mjpeg)
                 self.http.start()
                 started.append(self.http)
                 self.workers.add(self.http.worker)
@@ -588,6 +589,7 @@ class Monitor:
                 "fault": self._storage_fault.raised,
             },
             "mqtt": None if mqtt is None else mqtt.status(),
+            "mjpeg": None if self.http is None else self.http.streams.status(),
             "event_counts": counts_by_rig(self.event_counts),
             "latency_s": {k: quantiles(v) for k, v in self.latency_s.items()},
         }
@@ -649,6 +651,15 @@ class Monitor:
         """A rig's latest ``overlay`` (JPEG) or ``thermal`` (PNG) picture (:mod:`.live`)."""
         runner = self.runners.get(rig)
         return None if runner is None else runner.live.picture(what, width)
+
+    def video(self, rig: str, view: str, hz: float) -> VideoFrame | None:
+        """A rig's latest picture framed for a video stream playing at ``hz`` (:mod:`.live`):
+        titled with its name, location and the frame's time."""
+        runner = self.runners.get(rig)
+        if runner is None:
+            return None
+        title = " ".join(filter(None, (rig, runner.config.location)))
+        return runner.live.video(view, title, hz)
 
     def trend(self, rig: str) -> list[dict[str, Any]] | None:
         """A rig's readings over the last hour (:mod:`.live`)."""

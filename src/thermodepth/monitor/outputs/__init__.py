@@ -11,6 +11,7 @@ module              what
 :mod:`.notify`      notifications' common delivery: the outbox, retries, the hourly limit
 :mod:`.webhook`     a notification target: a signed JSON POST of each event
 :mod:`.email`       a notification target: an e-mail of each event, its overlay attached
+:mod:`.rtsp`        an RTSP server: each rig's live video as H.264
 ==================  ===========================================================================
 
 :data:`OUTPUT_BUILDERS` makes each from its section of the config (none: not asked for; the
@@ -65,6 +66,14 @@ def _notify(config: MonitorConfig, context: OutputContext) -> list[Output]:
     return [notifier(target, context) for target in config.notify]
 
 
+def _rtsp(config: MonitorConfig, context: OutputContext) -> list[Output]:
+    if config.rtsp is None:
+        return []
+    from .rtsp import RtspOutput
+
+    return [RtspOutput(config.rtsp, context)]
+
+
 def _describe_mqtt(config: MonitorConfig) -> list[str]:
     from .mqtt import describe
 
@@ -89,11 +98,18 @@ def _describe_notify(config: MonitorConfig) -> list[str]:
     return [describe(target) for target in config.notify]
 
 
+def _describe_rtsp(config: MonitorConfig) -> list[str]:
+    from .rtsp import describe
+
+    return [] if config.rtsp is None else [describe(config.rtsp)]
+
+
 OUTPUT_BUILDERS: dict[str, OutputKind] = {
     "mqtt": OutputKind(_mqtt, _describe_mqtt),
     "opcua": OutputKind(_opcua, _describe_opcua),
     "modbus": OutputKind(_modbus, _describe_modbus),
     "notify": OutputKind(_notify, _describe_notify),
+    "rtsp": OutputKind(_rtsp, _describe_rtsp),
 }
 """Each output by the config section that asks for it."""
 

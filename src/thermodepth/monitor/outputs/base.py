@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 if TYPE_CHECKING:
     from ...pipeline import FusedFrame, Settings
     from ..config import MonitorConfig
-    from ..live import Picture
+    from ..live import Picture, VideoFrame
     from ..store import EventStore
     from ..workers import Worker
 
@@ -30,6 +30,9 @@ Acknowledge = Callable[[str, str, str], list[dict[str, Any]]]
 cannot be)."""
 Pictures = Callable[[str, str, "int | None"], "Picture | None"]
 """``picture(rig, what, width)``: a rig's live ``overlay`` (JPEG) or ``thermal`` (PNG)."""
+Videos = Callable[[str, str, float], "VideoFrame | None"]
+"""``video(rig, view, hz)``: a rig's latest ``overlay`` or ``thermal`` picture framed for a
+video stream playing at ``hz``."""
 
 
 class RigEntities(NamedTuple):
@@ -69,10 +72,10 @@ def entities_of(config: MonitorConfig) -> list[RigEntities]:
 class OutputContext:
     """What the monitor gives an output's builder: the config, the rigs, the event store (its
     outbox), how to acknowledge, the live pictures, whom to tell when an event has been
-    delivered (``delivered(event)``: the broker's latency figures), the rigs' status now
-    (``rig_status()``: ``/api/status``'s ``rigs``), and an event's evidence as the HTTP API
+    delivered (``delivered(event)``: the latency figures), the rigs' status now
+    (``rig_status()``: ``/api/status``'s ``rigs``), an event's evidence as the HTTP API
     gives it (``evidence_of(event)``: its names; ``evidence_file(id, name)``: the file, None
-    while there is none)."""
+    while there is none) and the rigs' video pictures (``video``)."""
 
     config: MonitorConfig
     rigs: list[RigEntities]
@@ -83,6 +86,7 @@ class OutputContext:
     rig_status: Callable[[], list[dict[str, Any]]]
     evidence_of: Callable[[dict[str, Any]], list[str]]
     evidence_file: Callable[[int, str], Path | None]
+    video: Videos
 
 
 class Output:
