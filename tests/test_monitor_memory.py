@@ -102,3 +102,35 @@ def test_replayed_frames_are_their_own_arrays(tmp_path: Path) -> None:
     for m in matches:  # a frame kept keeps its own bytes, not its batch's
         assert m.pair.depth.base is None or m.pair.depth.base.nbytes == m.pair.depth.nbytes
         assert np.shares_memory(m.pair.depth, m.depth.depth)
+
+
+FRAGMENTED = """
+import numpy as np
+from thermodepth.monitor.bounded import give_back_memory
+
+def resident_mb():
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * 4096 / 1e6
+
+held = [np.ones(12_500) for _ in range(800)]  # 100 kB each: in the heap, not mmapped
+keep = held[-1]  # the heap's top still in use: glibc cannot trim what lies under it
+del held
+freed = resident_mb()
+print(give_back_memory(), freed, resident_mb())
+"""
+
+
+def test_memory_freed_between_chunks_in_use_is_given_back() -> None:
+    # 80 MB freed under one array still held: resident until given back (glibc)
+    import ctypes.util
+    import subprocess
+    import sys
+
+    if "libc.so" not in (ctypes.util.find_library("c") or ""):
+        pytest.skip("malloc_trim is glibc's; this C library has none")
+    done = subprocess.run(
+        [sys.executable, "-c", FRAGMENTED], capture_output=True, text=True, check=True
+    )
+    given, freed_mb, after_mb = done.stdout.split()
+    assert given == "True"
+    assert float(freed_mb) - float(after_mb) > 60  # of the 80 MB freed

@@ -6,17 +6,29 @@ The policy is the caller's: :meth:`ByteQueue.offer` refuses an item that would t
 queue past its bytes (the caller counts it and goes on: a rig never waits for its
 evidence), and an item alone larger than the bound is still taken into an empty queue, so
 that a large frame is not lost for ever.
+
+Memory given back: frames of a few MB are allocated and freed many times a second on many
+threads; glibc keeps what they freed in its heaps (one per thread, up to 8 per core) for
+reuse, scattered among what is still held, so the monitor's resident memory grows with its
+rigs and after a burst stays high. :func:`give_back_memory` returns those free pages to the
+system (glibc's ``malloc_trim``); the monitor's clock calls it every :data:`GIVE_BACK_S`.
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import threading
 from collections import deque
+from functools import cache
 from typing import Any
 
 import numpy as np
 
 MB = 1 << 20
+GIVE_BACK_S = 5.0
+"""How often the monitor gives the C heap's free memory back (measured, 8 rigs at 1280x720
+after 40 s: 2.1 GB resident, where 2.7 GB without; the same CPU)."""
 
 
 def nbytes_of(item: Any, depth: int = 2) -> int:
@@ -85,3 +97,23 @@ class ByteQueue:
     def __len__(self) -> int:
         with self._ready:
             return len(self._items)
+
+
+@cache
+def _malloc_trim() -> Any:
+    name = ctypes.util.find_library("c")
+    try:
+        return ctypes.CDLL(name).malloc_trim if name else None
+    except (OSError, AttributeError):  # not glibc (musl, macOS): nothing to call
+        return None
+
+
+def give_back_memory() -> bool:
+    """Give the free pages of the C heaps back to the system (glibc's ``malloc_trim(0)``:
+    the free memory between chunks still in use too, not only at a heap's top); False where
+    the C library has no such call. Takes milliseconds; safe from any thread."""
+    trim = _malloc_trim()
+    if trim is None:
+        return False
+    trim(0)
+    return True

@@ -34,6 +34,7 @@ from .. import __version__
 from ..alarms import RAISED, event_line
 from ..io.measurements import jsonable
 from ..pipeline import FusedFrame
+from .bounded import GIVE_BACK_S, give_back_memory
 from .config import MONITOR, MonitorConfig, RigConfig
 from .evidence import Evidence
 from .failsafe import STORAGE_FAULT, Fault
@@ -470,11 +471,14 @@ class Monitor:
     def _clock(self, worker: Worker) -> None:
         watchdog_s = watchdog_interval_s()
         last = time.monotonic()
-        last_dog = float("-inf")
+        last_dog = last_give = float("-inf")
         while not worker.stopping.wait(TICK_S):
             worker.beat()
             now = time.monotonic()
             dt, last = now - last, now
+            if now - last_give >= GIVE_BACK_S:  # the frames' freed memory (bounded.py)
+                give_back_memory()
+                last_give = now
             for runner in list(self.runners.values()):
                 self._watch(runner, now, dt)
             well = all(r.alive for r in self.runners.values()) and not self.workers.unhealthy()
