@@ -88,12 +88,15 @@ class EmailOutput(Notifier):
 
     def send(self, events: list[dict[str, Any]], digest: bool) -> None:
         msg = self.message(events, digest)
+        # before MAIL FROM a refusal is the target's (a login, TLS), not the message's
+        sending = False
         try:
             with smtplib.SMTP(self.host, self.port, timeout=self.config.timeout_s) as smtp:
                 if self.config.starttls:
                     smtp.starttls(context=self.ssl_context())
                 if self.config.user is not None and self.password is not None:
                     smtp.login(self.config.user, self.password)
+                sending = True
                 refused = smtp.send_message(msg)
         except smtplib.SMTPRecipientsRefused as exc:
             codes = [code for code, _ in exc.recipients.values()]
@@ -102,9 +105,12 @@ class EmailOutput(Notifier):
         except smtplib.SMTPResponseException as exc:
             said = exc.smtp_error
             text = said.decode("utf-8", "replace") if isinstance(said, bytes) else str(said)
-            raise DeliveryError(f"SMTP {exc.smtp_code} {text}", exc.smtp_code < 500) from None
+            # a wrong password or a server that refuses us is retried (and shown), never a
+            # reason to drop every event waiting: only the message's own refusal is final
+            final = sending and exc.smtp_code >= 500
+            raise DeliveryError(f"SMTP {exc.smtp_code} {text}", not final) from None
         except smtplib.SMTPNotSupportedError as exc:
-            raise DeliveryError(f"SMTP: {exc}", False) from None
+            raise DeliveryError(f"SMTP: {exc}", True) from None
         except (smtplib.SMTPException, OSError) as exc:
             raise DeliveryError(f"SMTP {self.host}:{self.port}: {exc}", True) from None
         if refused:

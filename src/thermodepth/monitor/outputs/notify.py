@@ -47,6 +47,10 @@ MEMORY_MAX = 1000
 PICTURE_WAIT_S = 10.0
 """How long a message waits for its event's overlay to be drawn (then goes without)."""
 WAKE_S = 1.0
+UNMADE_TRIES = 3
+"""A message that cannot be made (not a receiver's answer: an error of ours, a file gone)
+is tried so many times, then counted in ``failed`` and given up, so that it cannot stop
+its target for ever."""
 LIMIT_S = 120.0
 """How long a target's worker may be down before the monitor is unwell."""
 
@@ -140,7 +144,16 @@ class Notifier(Output):
             held = any(e.get("id") in self._held for e in pending)
             batch = pending if held and len(pending) > 1 else pending[:1]
             try:
-                self.send(batch, digest=len(batch) > 1)
+                try:
+                    self.send(batch, digest=len(batch) > 1)
+                except DeliveryError:
+                    raise
+                except Exception as exc:  # a message that cannot be made: tried a few times
+                    self.log.error("%s: cannot make its message", self.name, exc_info=True)
+                    raise DeliveryError(
+                        f"cannot make its message ({type(exc).__name__}: {exc})",
+                        retry=attempt + 1 < UNMADE_TRIES,
+                    ) from exc
             except DeliveryError as exc:
                 self.last_error = exc.message
                 if exc.retry:

@@ -65,6 +65,8 @@ KEY_FRAME_S = 2.0
 FIRST_FRAME_S = 10.0
 """How long a first viewer waits for its rig's first picture (a running rig's comes within a
 quarter of a second of being asked for) before it is refused."""
+CLIENT_THREADS = 4
+"""The RTSP server's threads for its clients (GStreamer's default: one for all)."""
 BEAT_S = 0.5
 WORKER_LIMIT_S = 30.0
 
@@ -289,6 +291,9 @@ class RtspOutput(Output):
         server.set_address(self.host)
         server.set_service(str(self.port))
         server.get_session_pool().set_max_sessions(self.config.max_viewers)
+        # a first viewer waits on its client thread for its rig's first picture: with the
+        # default one thread, every other client would wait with it
+        server.get_thread_pool().set_max_threads(CLIENT_THREADS)
         token = rtsp.RTSPToken()
         token.set_string(rtsp.RTSP_TOKEN_MEDIA_FACTORY_ROLE, ROLE)
         auth = rtsp.RTSPAuth()
@@ -323,6 +328,8 @@ class RtspOutput(Output):
         source.attach(context)
         self.port = server.get_bound_port()
 
+        failed: list[BaseException] = []
+
         def beat() -> bool:
             worker.beat()
             if worker.stopping.is_set():
@@ -330,7 +337,15 @@ class RtspOutput(Output):
             return True
 
         def feed() -> bool:
-            self._feed()
+            # an exception in a GLib callback is printed and removes its timer: every stream
+            # would freeze while the beat went on; the loop ends instead and the worker
+            # restarts it (supervised, logged)
+            try:
+                self._feed()
+            except Exception as exc:
+                failed.append(exc)
+                loop.quit()
+                return False
             return True
 
         for every_s, call in ((BEAT_S, beat), (1.0 / self.config.fps, feed)):
@@ -344,6 +359,8 @@ class RtspOutput(Output):
         finally:
             self.serving = False
             self._release(server, source)
+        if failed:
+            raise failed[0]
 
     def _release(self, server: Any, source: Any) -> None:
         """However the loop ended: the viewers let go, every stream's pipeline stopped and the
