@@ -20,6 +20,7 @@ monitor refuses to listen beyond loopback unless ``allow_remote: true``.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import socket
 import threading
 import time
@@ -74,6 +75,11 @@ WORKER_LIMIT_S = 30.0
 def gstreamer() -> tuple[Any, Any, Any]:
     """GStreamer, its RTSP server and GLib (``Gst``, ``GstRtspServer``, ``GLib``), initialised;
     InputError (:data:`INSTALL`, one line) when PyGObject or a typelib is not there."""
+    # GStreamer brings libunwind, whose _Unwind_Resume, once global, takes the place of
+    # libgcc's for every library bound after: the next C++ exception anywhere in the process
+    # (matplotlib's fonts, OpenCV's cv::Exception) aborted it. libgcc first keeps its own.
+    with contextlib.suppress(OSError):
+        ctypes.CDLL("libgcc_s.so.1", mode=ctypes.RTLD_GLOBAL)
     try:
         import gi
 
