@@ -128,7 +128,7 @@ class Notifier(Output):
             worker.beat()
             with self._memory_lock:
                 memory = list(self._memory)
-            pending = memory + self.store.outbox(DIGEST_MAX, target=self.name)
+            pending = (memory + self.store.outbox(DIGEST_MAX, target=self.name))[:DIGEST_MAX]
             if not pending:
                 self._wake.wait(WAKE_S)
                 self._wake.clear()
