@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..figures import ALARM_RGB, alarm_rois, display_range_c, overlay_rgb, roi_outlines
+from ..isotherms import ISOTHERM_RGB
 from ..measure import DepthRangeRoi, PolygonRoi, Roi, hotspot_box_on_depth
 from ..pipeline import FusedFrame
 from ..plotting import temperature_rgb
@@ -48,6 +49,7 @@ def _bgr(rgb: NDArray[np.floating]) -> NDArray[np.uint8]:
 FONT, FONT_SCALE, FONT_THICK = cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1
 WHITE, BLACK = (255, 255, 255), (0, 0, 0)
 ALARM_BGR = tuple(round(255 * c) for c in ALARM_RGB[::-1])
+ISOTHERM_BGR = ISOTHERM_RGB[::-1]
 Rect = tuple[int, int, int, int]
 """A rectangle of pixels (x0, y0, x1, y1), both ends inside."""
 
@@ -153,7 +155,29 @@ def overlay_image(
             continue
         color = (255, 255, 0) if hs.resolvable else (0, 255, 255)
         draw_hotspot(img, box, f"{hs.max_c:.1f} C  {hs.distance_m:.2f} m", color)
+    draw_lines_and_isotherms(img, frame)
     return img
+
+
+def draw_lines_and_isotherms(img: NDArray[np.uint8], frame: FusedFrame) -> None:
+    """Each line's hottest point (a ring) labelled with its temperature and where it is
+    along the line (m) of its length, and each isotherm's area beside its band's top
+    (the lines themselves are outlined as ROIs, the bands drawn in the image)."""
+    for p in frame.lines:
+        if p.max_px is None:
+            continue
+        u, v = p.max_px
+        cv2.circle(img, (u, v), 5, WHITE, 2, cv2.LINE_AA)
+        text = f"{p.max_c:.1f} C at {p.max_at_m:.2f} / {p.length_m:.2f} m"
+        _label(img, text, label_place((u - 6, v - 6, u + 6, v + 6), _label_size(text),
+                                      img.shape), WHITE)  # fmt: skip
+    width = img.shape[1]
+    for iso in frame.isotherms:
+        if iso.n == 0:
+            continue
+        v, u = divmod(int(iso.pixels[0]), width)  # its topmost pixel, raster order
+        text = f"{iso.name}: {iso.area_cm2:.0f} cm2"
+        _label(img, text, label_place((u, v, u, v), _label_size(text), img.shape), ISOTHERM_BGR)
 
 
 LEGEND_PX = 150
