@@ -26,7 +26,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..figures import ALARM_RGB, alarm_rois, display_range_c, overlay_rgb, roi_outlines
-from ..isotherms import ISOTHERM_RGB
+from ..isotherms import ISOTHERM_RGB, IsothermArea
+from ..lines import LineProfile
 from ..measure import DepthRangeRoi, PolygonRoi, Roi, hotspot_box_on_depth
 from ..pipeline import FusedFrame
 from ..plotting import temperature_rgb
@@ -337,6 +338,16 @@ class LiveView:
     _cache: dict[tuple[int, str, int | None], Picture] = field(default_factory=dict)
     _videos: dict[str, VideoFrame] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
+    _shapes: tuple[list[LineProfile], list[IsothermArea]] = ([], [])  # the latest measured
+
+    def lines(self) -> dict[str, Any]:
+        """The latest frame's line profiles and isotherm areas (plain data: a dashboard's
+        chart), as its JSON line has them."""
+        lines, isotherms = self._shapes
+        return {
+            "lines": [p.as_dict() for p in lines],
+            "isotherms": [i.as_dict() for i in isotherms],
+        }
 
     def fused(self, fused: FusedFrame, alarms: AlarmTracker | None = None) -> None:
         """A rig's fused frame (its own thread): kept for the screens while someone looks,
@@ -347,6 +358,7 @@ class LiveView:
             hot = fused.hotspots[0].max_c if fused.hotspots else None
             rois = {r.name: (r.max_c if r.n else None) for r in fused.rois}
             self.trend.add(fused.thermal_time_s, hot, rois)
+            self._shapes = (fused.lines, fused.isotherms)  # one reference: no copy per frame
         with self._lock:
             rates = [hz for hz, until in self._wanted.items() if until >= now]
         if not rates or now - self.last_s < 1.0 / max(rates):
