@@ -6,7 +6,9 @@ condition on it:
 - ``above_c`` / ``below_c``: its value (the hotspot's max; an ROI's ``stat``) beyond a limit;
 - ``rise_c_per_min``: the value rising faster than this, over the last ``rise_window_s``;
 - ``delta_c``: the value above a reference ROI's mean by more than this (``relative_to``), the
-  way a busbar is compared with its neighbour under the same load.
+  way a busbar is compared with its neighbour under the same load;
+- ``area_cm2_above``: an isotherm's area on the surfaces (:mod:`thermodepth.isotherms`) above
+  this many cm^2 (its events carry ``value_cm2``, and ``value_c`` None).
 
 The condition must hold ``for_s`` seconds (or, as before, ``for_frames`` frames in a row) to
 raise the rule (an on-delay: frame rates differ per camera). It clears once the value is back
@@ -25,7 +27,7 @@ from __future__ import annotations
 
 import threading
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Any
@@ -37,7 +39,7 @@ from .measure import Hotspot, RoiStats
 LEVELS = ("warning", "alarm")
 RAISED = ("alarm", "escalated")
 """The events that raise a rule (a raise, and a raise that escalates)."""
-KINDS = ("above_c", "below_c", "rise_c_per_min", "delta_c")
+KINDS = ("above_c", "below_c", "rise_c_per_min", "delta_c", "area_cm2_above")
 STATS = ("max", "mean", "min")
 
 
@@ -59,6 +61,7 @@ class AlarmRule:
     delta_c: float | None = None
     relative_to: str | None = None
     stat: str | None = None
+    area_cm2_above: float | None = None
     for_s: float | None = None
     clear_below_c: float | None = None
     clear_above_c: float | None = None
@@ -70,7 +73,7 @@ class AlarmRule:
         if len(given) != 1:
             raise ValueError(
                 f"alarm {self.name!r}: give exactly one of above_c, below_c, rise_c_per_min, "
-                f"delta_c (got {', '.join(given) or 'none'})"
+                f"delta_c, area_cm2_above (got {', '.join(given) or 'none'})"
             )
         if self.for_frames < 1:
             raise ValueError(f"alarm {self.name!r}: for_frames must be >= 1, got {self.for_frames}")
@@ -111,6 +114,7 @@ class AlarmRule:
             "below_c": f"below {self.limit:g} C",
             "rise_c_per_min": f"rising faster than {self.limit:g} C/min",
             "delta_c": f"more than {self.limit:g} C above {self.relative_to}",
+            "area_cm2_above": f"area above {self.limit:g} cm2",
         }[self.kind]
         if self.for_s is not None:
             return f"{words} for {self.for_s:g} s"
@@ -178,9 +182,16 @@ class AlarmTracker:
         return [name for name, s in self.states.items() if s.raised]
 
     def value_of(
-        self, rule: AlarmRule, hotspots: Sequence[Hotspot], by_name: dict[str, RoiStats]
+        self,
+        rule: AlarmRule,
+        hotspots: Sequence[Hotspot],
+        by_name: dict[str, RoiStats],
+        areas_cm2: Mapping[str, float] | None = None,
     ) -> tuple[float, Any]:
-        """The value a rule watches in a frame (NaN: nothing to watch), and its subject."""
+        """The value a rule watches in a frame (NaN: nothing to watch), and its subject
+        (``areas_cm2``: the isotherms' areas by name, for an area rule)."""
+        if rule.kind == "area_cm2_above":
+            return (areas_cm2 or {}).get(rule.what, float("nan")), by_name.get(rule.what)
         if rule.what == "hotspot":
             hot = hotspots[0] if hotspots else None
             return (hot.max_c if hot else float("nan")), hot
@@ -212,10 +223,12 @@ class AlarmTracker:
         frame_index: int,
         hotspots: Sequence[Hotspot],
         rois: Iterable[RoiStats],
+        areas_cm2: Mapping[str, float] | None = None,
     ) -> list[dict[str, Any]]:
-        """The events of a measured frame."""
+        """The events of a measured frame (``areas_cm2``: its isotherms' areas by name)."""
         with self._lock:
-            return self._events(time_s, frame_index, hotspots, {r.name: r for r in rois})
+            by_name = {r.name: r for r in rois}
+            return self._events(time_s, frame_index, hotspots, by_name, areas_cm2)
 
     def _events(
         self,
@@ -223,12 +236,13 @@ class AlarmTracker:
         frame_index: int,
         hotspots: Sequence[Hotspot],
         by_name: dict[str, RoiStats],
+        areas_cm2: Mapping[str, float] | None = None,
     ) -> list[dict[str, Any]]:
         events: list[dict[str, Any]] = []
         self._last = (time_s, frame_index)
         for rule in self.rules:
             s = self.states[rule.name]
-            value, subject = self.value_of(rule, hotspots, by_name)
+            value, subject = self.value_of(rule, hotspots, by_name, areas_cm2)
             watched = self._rate(s, rule, time_s, value) if rule.kind == "rise_c_per_min" else value
             if not s.raised:
                 if rule.met(watched):
@@ -312,6 +326,8 @@ def _event(
         "for_frames": rule.for_frames,
         "value_c": None if not np.isfinite(value) else round(value, 3),
     }
+    if rule.kind == "area_cm2_above":  # an area, not a temperature
+        event["value_cm2"], event["value_c"] = event["value_c"], None
     if rule.for_s is not None:
         event["for_s"] = rule.for_s
     if isinstance(subject, Hotspot):
@@ -330,6 +346,8 @@ def event_line(event: dict[str, Any]) -> str:
     frames), frame 12``; an acknowledgement says by whom; an event of no frame (a rig that
     never delivered one) names none."""
     value = "" if event.get("value_c") is None else f": {event['value_c']} C"
+    if event.get("value_cm2") is not None:
+        value = f": {event['value_cm2']} cm2"
     who = f" by {event['by']}" if event["event"] == "acknowledged" else ""
     frame = "" if event.get("frame") is None else f", frame {event['frame']}"
     return (

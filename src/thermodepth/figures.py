@@ -11,6 +11,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .compensation import CompensationModel, apply_to_table, by_vox
+from .isotherms import ISOTHERM_RGB, IsothermRoi
+from .lines import LineRoi
 from .plotting import distinct_styles, pyplot, save_figure, temperature_rgb
 from .registration import Reason
 from .sweep import SweepTable
@@ -120,7 +122,8 @@ STRIPE_PX = 4
 def overlay_rgb(frame: FusedFrame, range_c: tuple[float, float]) -> NDArray[np.float32]:
     """The overlay's image, (H, W, 3) RGB 0-1 on the depth grid: the temperature (inferno over
     ``range_c``, C) at 70 % over the depth camera's IR image (or a shaded depth map, near
-    light), the pixels without a temperature shown by why (:data:`NO_TEMPERATURE`). Composited
+    light), the pixels without a temperature shown by why (:data:`NO_TEMPERATURE`), the
+    frame's isotherm bands in :data:`~thermodepth.isotherms.ISOTHERM_RGB`. Composited
     here, as matplotlib's alpha would, so that a figure draws one image."""
     if frame.ir is not None:
         grey = frame.ir.astype(np.float32) / 255.0
@@ -140,6 +143,9 @@ def overlay_rgb(frame: FusedFrame, range_c: tuple[float, float]) -> NDArray[np.f
     seen = np.isfinite(t)
     colours = temperature_rgb(t[seen], range_c).astype(np.float32) / 255.0
     rgb[seen] = 0.3 * rgb[seen] + 0.7 * colours
+    # isotherms: their band in one colour outside every palette (thermodepth.isotherms)
+    for iso in frame.isotherms:
+        rgb.reshape(-1, 3)[iso.pixels] = np.asarray(ISOTHERM_RGB, np.float32) / 255.0
     return rgb
 
 
@@ -154,8 +160,14 @@ def roi_outlines(roi: Roi, depth_m: NDArray[np.floating]) -> list[NDArray[np.int
     """Where an ROI is on the depth image, as closed outlines, each an (N, 2) array of pixel
     vertices (u, v): a rectangle's corners (its last pixels inside), a polygon's vertices, a
     depth range's outer edges of its pieces in ``depth_m`` ((H, W), m) of at least
-    :data:`MIN_OUTLINE_PX` pixels (none: an empty list)."""
+    :data:`MIN_OUTLINE_PX` pixels (none: an empty list); a line's two ends; an isotherm none
+    (its band is drawn in the image, :func:`overlay_rgb`)."""
     from .measure import PolygonRoi, RectRoi
+
+    if isinstance(roi, LineRoi):
+        return [np.round(np.asarray([roi.start, roi.end])).astype(np.int32)]
+    if isinstance(roi, IsothermRoi):
+        return []
 
     if isinstance(roi, RectRoi):
         corners = [

@@ -25,6 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .camera import Intrinsics, RigidTransform, corner_rays, pixel_rays
+from .isotherms import IsothermRoi
+from .lines import LineRoi
 from .radiometry import celsius_to_kelvin, stefan_boltzmann_power_w
 from .registration.kernels import FIXED_POINT, VALUE_LIMIT
 from .registration.regions import Moments, Region, exact_sum
@@ -84,7 +86,7 @@ class DepthRangeRoi:
             return (depth_m >= self.near_m) & (depth_m <= self.far_m)
 
 
-Roi = RectRoi | PolygonRoi | DepthRangeRoi
+Roi = RectRoi | PolygonRoi | DepthRangeRoi | LineRoi | IsothermRoi
 Box = tuple[slice, slice]
 """Rows and columns of an image, as slices."""
 

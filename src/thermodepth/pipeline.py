@@ -47,6 +47,8 @@ from .compensation import CompensationModel, Flag, NoCompensation, load_model
 from .conditions import ConditionsSchema, Radiometry, checked_condition
 from .errors import FieldError, InputError, repeated
 from .frames import FramePair, Telemetry, thermal_output
+from .isotherms import IsothermArea, IsothermRoi, isotherm_area
+from .lines import LineProfile, LineRoi, line_profile
 from .measure import (
     DepthRangeRoi,
     Hotspot,
@@ -153,26 +155,59 @@ def _polygon_area(vertices: list[tuple[float, float]]) -> float:
     return float(abs(np.dot(u, np.roll(v, -1)) - np.dot(v, np.roll(u, -1))) / 2)
 
 
+class IsothermSettings(StrictSchema):
+    """An isotherm's band: the pixels at or above ``above_c`` (C)."""
+
+    above_c: TempC
+
+
+SHAPES = ("rect", "polygon", "depth_range_m", "line", "isotherm")
+"""The kinds of ROI; the last two (a line's profile, an isotherm's band and area) are
+measured on the depth grid after it is sampled, not summed while it is."""
+
+
 class RoiSettings(StrictSchema):
-    """An ROI: one shape (``rect``, ``polygon`` or ``depth_range_m``) and, optionally, the
-    viewing conditions of what it covers where they differ from the settings' radiometry
-    (a painted cabinet and a bare busbar in one view): ``emissivity`` and
-    ``reflected_temp_c``."""
+    """An ROI: one shape (``rect``, ``polygon``, ``depth_range_m``, ``line`` [[u0, v0],
+    [u1, v1]] or ``isotherm`` {above_c}, optionally ``within`` another ROI) and, optionally
+    (not for a line or an isotherm), the viewing conditions of what it covers where they
+    differ from the settings' radiometry (a painted cabinet and a bare busbar in one view):
+    ``emissivity`` and ``reflected_temp_c``."""
 
     name: str
     rect: tuple[int, int, int, int] | None = None
     polygon: list[tuple[float, float]] | None = Field(default=None, min_length=3)
     depth_range_m: tuple[float, float] | None = None
+    line: tuple[tuple[float, float], tuple[float, float]] | None = None
+    isotherm: IsothermSettings | None = None
+    within: str | None = None
     emissivity: Annotated[float | None, checked_condition("emissivity")] = None
     reflected_temp_c: Annotated[float | None, checked_condition("reflected_temp_c")] = None
 
+    @property
+    def shape(self) -> str:
+        """Which kind of ROI it is (:data:`SHAPES`)."""
+        return next(k for k in SHAPES if getattr(self, k) is not None)
+
     @model_validator(mode="after")
     def _one_shape(self) -> RoiSettings:
-        given = [k for k in ("rect", "polygon", "depth_range_m") if getattr(self, k) is not None]
+        given = [k for k in SHAPES if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(
                 "give exactly one of rect [u0, v0, u1, v1], polygon "
-                "[[u, v], ...] or depth_range_m [near, far]"
+                "[[u, v], ...], depth_range_m [near, far], line [[u0, v0], [u1, v1]] "
+                "or isotherm {above_c: C}"
+            )
+        # -- lines and isotherms (thermodepth.lines, thermodepth.isotherms) --
+        if self.line is not None and self.line[0] == self.line[1]:
+            raise ValueError(f"line {[list(p) for p in self.line]}: its ends are one pixel")
+        if self.within is not None and self.isotherm is None:
+            raise ValueError("within is for an isotherm (the ROI its band is confined to)")
+        if given[0] in ("line", "isotherm") and (
+            self.emissivity is not None or self.reflected_temp_c is not None
+        ):
+            raise ValueError(
+                f"emissivity and reflected_temp_c are not for a {given[0]} (it reads the "
+                "frame's temperatures, under the settings' radiometry)"
             )
         if self.rect is not None and not (
             self.rect[0] < self.rect[2] and self.rect[1] < self.rect[3]
@@ -193,6 +228,10 @@ class RoiSettings(StrictSchema):
             return RectRoi(self.name, *self.rect)
         if self.polygon is not None:
             return PolygonRoi(self.name, tuple(self.polygon))
+        if self.line is not None:
+            return LineRoi(self.name, self.line[0], self.line[1])
+        if self.isotherm is not None:
+            return IsothermRoi(self.name, self.isotherm.above_c, self.within)
         assert self.depth_range_m is not None
         return DepthRangeRoi(self.name, *self.depth_range_m)
 
@@ -200,10 +239,10 @@ class RoiSettings(StrictSchema):
 class AlarmSettings(StrictSchema):
     """An alarm rule (:class:`~thermodepth.alarms.AlarmRule`; docs/pipeline.md): one
     condition (``above_c``, ``below_c``, ``rise_c_per_min`` over ``rise_window_s``, or
-    ``delta_c`` against the ROI ``relative_to``) on ``what`` (``hotspot`` or an ROI, its
-    ``stat``), held ``for_s`` seconds (or ``for_frames`` frames); cleared past
-    ``clear_below_c`` / ``clear_above_c`` for ``clear_for_s``; ``latch``: raised until
-    acknowledged; ``level``: warning or alarm."""
+    ``delta_c`` against the ROI ``relative_to``; ``area_cm2_above`` for an isotherm) on
+    ``what`` (``hotspot`` or an ROI, its ``stat``), held ``for_s`` seconds (or
+    ``for_frames`` frames); cleared past ``clear_below_c`` / ``clear_above_c`` for
+    ``clear_for_s``; ``latch``: raised until acknowledged; ``level``: warning or alarm."""
 
     name: str
     what: str = "hotspot"
@@ -214,6 +253,7 @@ class AlarmSettings(StrictSchema):
     rise_window_s: float = Field(default=60.0, gt=0)
     delta_c: float | None = Field(default=None, gt=0)
     relative_to: str | None = None
+    area_cm2_above: float | None = Field(default=None, gt=0)
     stat: Literal["max", "mean", "min"] | None = None
     for_frames: int = Field(default=1, ge=1)
     for_s: float | None = Field(default=None, ge=0)
@@ -335,6 +375,23 @@ class Settings(StrictSchema):
                 )
             if a.stat is not None and a.what == "hotspot":
                 raise ValueError(f"alarm {a.name!r}: stat is for an ROI (a hotspot's max)")
+        # -- lines and isotherms: within names an ROI of area; area rules watch isotherms --
+        shapes = {r.name: r.shape for r in self.rois}
+        for r in self.rois:
+            if r.within is not None and shapes.get(r.within) not in SHAPES[:3]:
+                raise ValueError(
+                    f"ROI {r.name!r}: within={r.within!r} is not a rect, polygon or depth-range "
+                    f"ROI ({', '.join(n for n, k in shapes.items() if k in SHAPES[:3]) or 'none'})"
+                )
+        isotherms = [n for n, k in shapes.items() if k == "isotherm"]
+        for a in self.alarms:
+            if a.area_cm2_above is not None and a.what not in isotherms:
+                raise ValueError(
+                    f"alarm {a.name!r}: area_cm2_above is for an isotherm ROI "
+                    f"({', '.join(isotherms) or 'none'}), not {a.what!r}"
+                )
+            if a.area_cm2_above is not None and a.stat is not None:
+                raise ValueError(f"alarm {a.name!r}: stat is not for an area rule")
         return self
 
 
@@ -352,7 +409,10 @@ class FusedFrame:
     Depth grid (H, W): temp_depth_c (C, NaN where reason_depth != Reason.OK), reason_depth
     (:class:`~thermodepth.registration.Reason`), both from :attr:`on_depth`, sampled by
     ``sample_depth`` when first asked for; depth (the raw uint16 frame).
-    Measurements: hotspots (hottest first), rois, events (alarms raised or cleared).
+    Measurements: hotspots (hottest first), rois, events (alarms raised or cleared); lines
+    (:class:`~thermodepth.lines.LineProfile`) and isotherms
+    (:class:`~thermodepth.isotherms.IsothermArea`) of the line and isotherm ROIs (their
+    temperatures' figures are among ``rois`` too).
     """
 
     index: int
@@ -371,6 +431,8 @@ class FusedFrame:
     rois: list[RoiStats] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
     ir: NDArray[np.uint8] | None = None
+    lines: list[LineProfile] = field(default_factory=list)
+    isotherms: list[IsothermArea] = field(default_factory=list)
 
     @cached_property
     def on_depth(self) -> ThermalOnDepth:
@@ -428,6 +490,9 @@ class FusedFrame:
             "hotspots": [h.as_dict() for h in self.hotspots],
             "rois": [r.__dict__ for r in self.rois],
             "events": self.events,
+            # lines and isotherms: only when the settings have them
+            **({"lines": [p.as_dict() for p in self.lines]} if self.lines else {}),
+            **({"isotherms": [i.as_dict() for i in self.isotherms]} if self.isotherms else {}),
         }
 
 
@@ -484,24 +549,31 @@ class Pipeline:
         except FieldError as exc:
             raise InputError(f"{s.compensation}: {exc.message}") from None
         self.rois = [roi.roi() for roi in s.rois]
+        # lines and isotherms are measured on the sampled depth grid (measure_lines); the
+        # others, ROIs of area, are summed while it is sampled
+        self._lines = [r for r in self.rois if isinstance(r, LineRoi)]
+        self._isotherms = [r for r in self.rois if isinstance(r, IsothermRoi)]
+        area = [i for i, r in enumerate(self.rois) if not isinstance(r, LineRoi | IsothermRoi)]
         # where each ROI's pixels are, once: a fixed shape's box and mask, a depth range's
-        # raw depth values; the registration sums them while it samples each frame
-        regions = [
-            roi_region(roi, calibration.depth.shape, calibration.depth_scale_m) for roi in self.rois
-        ]
+        # raw depth values (a line: its pixels); the registration sums them while it samples
+        regions = {
+            i: roi_region(self.rois[i], calibration.depth.shape, calibration.depth_scale_m)
+            for i in (*area, *(i for i, r in enumerate(self.rois) if isinstance(r, LineRoi)))
+        }
         # ROIs under the settings' conditions are summed while the frame's temperature is
         # sampled; each other set of conditions (an ROI's emissivity, reflected temperature)
         # has its own temperatures and its own sampling pass
         groups: dict[tuple[float | None, float | None], list[int]] = {}
-        for i, roi_settings in enumerate(s.rois):
-            key = (roi_settings.emissivity, roi_settings.reflected_temp_c)
+        for i in area:
+            key = (s.rois[i].emissivity, s.rois[i].reflected_temp_c)
             groups.setdefault(key, []).append(i)
         h_d = calibration.depth.height
         self._groups = [
             (key, members, Regions([regions[i] for i in members], h_d))
             for key, members in groups.items()
         ]
-        for i, (roi, region) in enumerate(zip(self.rois, regions, strict=True)):
+        for i, region in regions.items():
+            roi = self.rois[i]
             if not isinstance(roi, DepthRangeRoi) and region.rows.start == region.rows.stop:
                 h, w = calibration.depth.shape
                 raise InputError(
@@ -647,6 +719,33 @@ class Pipeline:
         self.measure(frame, [m for m in moments if m is not None])
         return frame
 
+    # -- lines and isotherms (thermodepth.lines, thermodepth.isotherms) ---------------------
+
+    def measure_lines(self, frame: FusedFrame) -> dict[str, RoiStats]:
+        """Fill in the frame's line profiles and isotherms (none configured: nothing done,
+        the depth grid not sampled for them); returns their temperatures' statistics by
+        name, as the other ROIs' (flags not gathered: 0)."""
+        if not self._lines and not self._isotherms:
+            return {}
+        cal = self.calibration
+        t, z = frame.temp_depth_c, frame.depth_m
+        frame.lines = [line_profile(line, z, t, cal.depth) for line in self._lines]
+        by_name = {r.name: r for r in self.rois}
+        frame.isotherms = [
+            isotherm_area(
+                iso,
+                t,
+                z,
+                cal.depth,
+                None if iso.within is None else by_name[iso.within].mask(z.shape, z),
+            )
+            for iso in self._isotherms
+        ]
+        stats = {p.name: RoiStats(p.name, *p.stats()) for p in frame.lines}
+        for i in frame.isotherms:
+            stats[i.name] = RoiStats(i.name, i.n, i.mean_c, i.max_c, i.min_c, i.sd_c)
+        return stats
+
     def warm_up(self) -> None:
         """Run every numba kernel a frame of this pipeline runs once, so that numba compiles
         it now (or loads it from its cache): a monitor does so before its rigs' clocks start,
@@ -679,7 +778,8 @@ class Pipeline:
 
     def measure(self, frame: FusedFrame, roi_moments: list[Moments]) -> None:
         """Fill in the frame's hotspots, ROI statistics (from their sums, in the order of
-        the settings' ROIs) and alarm events."""
+        the settings' ROIs of area; lines and isotherms: :meth:`measure_lines`) and alarm
+        events."""
         s = self.settings
         cal = self.calibration
         frame.hotspots = find_hotspots(
@@ -693,9 +793,16 @@ class Pipeline:
             frame.flags_thermal,
             s.hotspots.min_thermal_px,
         )
+        measured = self.measure_lines(frame)
+        summed = iter(roi_moments)
         frame.rois = [
-            RoiStats.of(roi.name, m) for roi, m in zip(self.rois, roi_moments, strict=True)
+            measured[roi.name] if roi.name in measured else RoiStats.of(roi.name, next(summed))
+            for roi in self.rois
         ]
         frame.events = self.alarms.update(
-            frame.thermal_time_s, frame.index, frame.hotspots, frame.rois
+            frame.thermal_time_s,
+            frame.index,
+            frame.hotspots,
+            frame.rois,
+            {i.name: i.area_cm2 for i in frame.isotherms},
         )

@@ -38,7 +38,7 @@ from ..alarms import AlarmTracker
 from ..calibration import Calibration
 from ..compensation import CompensationModel, load_model
 from ..errors import FieldError, InputError, ThermodepthError, check_count, repeated
-from ..io.measurements import FILES, FrameLines, MeasurementWriter
+from ..io.measurements import ALL_FILES, FrameLines, MeasurementWriter
 from ..io.recording import Recording
 from ..pipeline import Pipeline, Settings
 from ..progress import SILENT, Reporter
@@ -397,7 +397,7 @@ def _clear(out: Path, entries: list[str]) -> None:
     ours = set(SUMMARY_FILES) | {MANIFEST}
     for name in entries:
         path = out / name
-        own_folder = path.is_dir() and {p.name for p in path.iterdir()} <= set(FILES)
+        own_folder = path.is_dir() and {p.name for p in path.iterdir()} <= set(ALL_FILES)
         if name not in ours and not own_folder:
             raise FieldError("out_dir", f"{path} is not a batch's result: not replacing {out}")
     for name in entries:

@@ -1,20 +1,41 @@
 """Measurements on disk: per fused frame, one JSON line (``measurements.jsonl``), alarm events
-(``alarms.jsonl``) and a hotspot table (``hotspots.csv``, one row per hotspot and frame)."""
+(``alarms.jsonl``) and a hotspot table (``hotspots.csv``, one row per hotspot and frame); with
+line or isotherm ROIs, also ``lines.csv`` (one row per line and frame: its length, max and
+where) and ``isotherms.csv`` (one row per isotherm and frame: its area), made at the first
+frame that has them (the profiles themselves are in the JSON lines)."""
 
 from __future__ import annotations
 
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from ..csvfile import CsvWriter
 
 FILES = ("measurements.jsonl", "alarms.jsonl", "hotspots.csv")
 """What a measurements folder holds: one JSON line per frame, one per alarm event, and one
 CSV row per hotspot and frame."""
+SHAPE_FILES = ("lines.csv", "isotherms.csv")
+"""What it holds besides with line or isotherm ROIs (:data:`LINE_COLUMNS`,
+:data:`ISOTHERM_COLUMNS`)."""
+ALL_FILES = FILES + SHAPE_FILES
+
+LINE_COLUMNS = (
+    "frame",
+    "thermal_time_s",
+    "name",
+    "length_m",
+    "max_c",
+    "max_at_m",
+    "max_u",
+    "max_v",
+    "n",
+    "gap_px",
+)
+ISOTHERM_COLUMNS = ("frame", "thermal_time_s", "name", "above_c", "area_cm2", "n", "max_c")
 
 HOTSPOT_COLUMNS = (
     "frame",
@@ -56,6 +77,8 @@ class FrameLines:
     frame: str
     alarms: list[str]
     hotspots: list[dict[str, str | int]]
+    lines: list[dict[str, str | int]] = field(default_factory=list)
+    isotherms: list[dict[str, str | int]] = field(default_factory=list)
 
     @classmethod
     def of(cls, fused: Any) -> FrameLines:
@@ -82,10 +105,40 @@ class FrameLines:
                     "flags": h.flags,
                 }
             )
+        when = f"{fused.thermal_time_s:.4f}"
+        lines: list[dict[str, str | int]] = [
+            {
+                "frame": fused.index,
+                "thermal_time_s": when,
+                "name": p.name,
+                "length_m": f"{p.length_m:.4f}",
+                "max_c": f"{p.max_c:.3f}",
+                "max_at_m": f"{p.max_at_m:.4f}",
+                "max_u": "" if p.max_px is None else p.max_px[0],
+                "max_v": "" if p.max_px is None else p.max_px[1],
+                "n": p.n,
+                "gap_px": p.gap_px,
+            }
+            for p in getattr(fused, "lines", ())
+        ]
+        isotherms: list[dict[str, str | int]] = [
+            {
+                "frame": fused.index,
+                "thermal_time_s": when,
+                "name": i.name,
+                "above_c": f"{i.above_c:g}",
+                "area_cm2": f"{i.area_cm2:.3f}",
+                "n": i.n,
+                "max_c": f"{i.max_c:.3f}",
+            }
+            for i in getattr(fused, "isotherms", ())
+        ]
         return cls(
             json.dumps(jsonable(fused.summary())) + "\n",
             [json.dumps(jsonable(event)) + "\n" for event in fused.events],
             rows,
+            lines,
+            isotherms,
         )
 
 
@@ -104,6 +157,8 @@ class MeasurementWriter:
         self._hotspots = open(hotspots, "w", newline="", encoding="utf-8")  # noqa: SIM115
         self._table = CsvWriter(self._hotspots, HOTSPOT_COLUMNS)
         self._table.header()
+        self._out = out
+        self._shapes: dict[str, tuple[TextIO, CsvWriter]] = {}  # made when first needed
 
     def write(self, fused: Any) -> None:
         """One fused frame (a :class:`~thermodepth.pipeline.FusedFrame`)."""
@@ -114,12 +169,30 @@ class MeasurementWriter:
         self._frames.write(lines.frame)
         self._alarms.writelines(lines.alarms)
         self._table.rows(lines.hotspots)
+        for name, columns, rows in (
+            (SHAPE_FILES[0], LINE_COLUMNS, lines.lines),
+            (SHAPE_FILES[1], ISOTHERM_COLUMNS, lines.isotherms),
+        ):
+            if rows:
+                self._shape_table(name, columns).rows(rows)
         # whole lines on disk as each frame ends: a killed run keeps every frame it measured
-        for f in (self._frames, self._alarms, self._hotspots):
+        for f in self._files:
             f.flush()
 
+    @property
+    def _files(self) -> list[TextIO]:
+        return [self._frames, self._alarms, self._hotspots, *(f for f, _ in self._shapes.values())]
+
+    def _shape_table(self, name: str, columns: tuple[str, ...]) -> CsvWriter:
+        if name not in self._shapes:
+            f = open(self._out / name, "w", newline="", encoding="utf-8")  # noqa: SIM115
+            table = CsvWriter(f, columns)
+            table.header()
+            self._shapes[name] = (f, table)
+        return self._shapes[name][1]
+
     def close(self) -> None:
-        for f in (self._frames, self._alarms, self._hotspots):
+        for f in self._files:
             if self.sync:
                 f.flush()
                 os.fsync(f.fileno())

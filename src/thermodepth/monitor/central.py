@@ -470,6 +470,10 @@ class CentralDashboard:
             r = self.rigs.get(rig)
             return None if r is None else list(r.trend.points)
 
+    def lines(self, rig: str) -> dict[str, Any] | None:
+        """Profiles are not published (MQTT carries each line's figures): none here."""
+        return None
+
     def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]:
         """Acknowledge through the rig's command topic and wait for its monitor's answer:
         its events, or AckRefusedError (404 no such rig, 409 refused by the monitor or its

@@ -29,6 +29,9 @@ route                                      what
                                            or ``thermal``), ``mjpeg.fps`` frames a second;
                                            503 beyond ``mjpeg.max_streams`` at once
 ``GET /api/rigs/RIG/trend``                its readings over the last hour
+``GET /api/rigs/RIG/lines``                its latest line profiles (temperature against
+                                           metres along the surface) and isotherm areas;
+                                           404 no such rig (or a central dashboard's)
 ``POST /api/ack``                          acknowledge ``{"rig", "rule", "by"}``: 200 with
                                            its events, 404 no such rig or rule, 409 not
                                            raised, 403 a forged request
@@ -129,6 +132,8 @@ class Monitor(Protocol):
     def video(self, rig: str, view: str, hz: float) -> VideoFrame | None: ...
 
     def trend(self, rig: str) -> list[dict[str, Any]] | None: ...
+
+    def lines(self, rig: str) -> dict[str, Any] | None: ...
 
     def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]: ...
 
@@ -491,6 +496,17 @@ def build_app(monitor: Monitor, auth: Auth, streams: Streams | None = None) -> S
         found = monitor.trend(request.path_params["rig"])
         return _json(found) if found is not None else _error("no such rig", 404)
 
+    async def lines(request: Request) -> Response:
+        """
+        responses:
+          200: {description: "the rig's latest line profiles (name, length_m, max_c, max_at_m,
+            max_px, n, gap_px, distance_m [], temp_c []) and isotherms (name, above_c,
+            area_cm2, n, max_c, mean_c)"}
+          404: {description: no such rig, or none kept here (a central dashboard)}
+        """
+        found = monitor.lines(request.path_params["rig"])
+        return _json(found) if found is not None else _error("no such rig", 404)
+
     async def ack(request: Request) -> Response:
         """
         requestBody:
@@ -574,6 +590,7 @@ def build_app(monitor: Monitor, auth: Auth, streams: Streams | None = None) -> S
         Route("/api/events/{id:int}", event),
         Route("/api/events/{id:int}/{what}", evidence),
         Route("/api/rigs/{rig:path}/trend", trend),  # a central dashboard's rigs: EDGE/RIG
+        Route("/api/rigs/{rig:path}/lines", lines),
         Route("/api/rigs/{rig:path}/stream.mjpeg", stream),
         Route("/api/rigs/{rig:path}/{what}", picture),
         Route("/api/ack", ack, methods=["POST"]),

@@ -26,6 +26,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..figures import ALARM_RGB, alarm_rois, display_range_c, overlay_rgb, roi_outlines
+from ..isotherms import ISOTHERM_RGB, IsothermArea
+from ..lines import LineProfile
 from ..measure import DepthRangeRoi, PolygonRoi, Roi, hotspot_box_on_depth
 from ..pipeline import FusedFrame
 from ..plotting import temperature_rgb
@@ -48,6 +50,7 @@ def _bgr(rgb: NDArray[np.floating]) -> NDArray[np.uint8]:
 FONT, FONT_SCALE, FONT_THICK = cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1
 WHITE, BLACK = (255, 255, 255), (0, 0, 0)
 ALARM_BGR = tuple(round(255 * c) for c in ALARM_RGB[::-1])
+ISOTHERM_BGR = ISOTHERM_RGB[::-1]
 Rect = tuple[int, int, int, int]
 """A rectangle of pixels (x0, y0, x1, y1), both ends inside."""
 
@@ -153,7 +156,29 @@ def overlay_image(
             continue
         color = (255, 255, 0) if hs.resolvable else (0, 255, 255)
         draw_hotspot(img, box, f"{hs.max_c:.1f} C  {hs.distance_m:.2f} m", color)
+    draw_lines_and_isotherms(img, frame)
     return img
+
+
+def draw_lines_and_isotherms(img: NDArray[np.uint8], frame: FusedFrame) -> None:
+    """Each line's hottest point (a ring) labelled with its temperature and where it is
+    along the line (m) of its length, and each isotherm's area beside its band's top
+    (the lines themselves are outlined as ROIs, the bands drawn in the image)."""
+    for p in frame.lines:
+        if p.max_px is None:
+            continue
+        u, v = p.max_px
+        cv2.circle(img, (u, v), 5, WHITE, 2, cv2.LINE_AA)
+        text = f"{p.max_c:.1f} C at {p.max_at_m:.2f} / {p.length_m:.2f} m"
+        _label(img, text, label_place((u - 6, v - 6, u + 6, v + 6), _label_size(text),
+                                      img.shape), WHITE)  # fmt: skip
+    width = img.shape[1]
+    for iso in frame.isotherms:
+        if iso.n == 0:
+            continue
+        v, u = divmod(int(iso.pixels[0]), width)  # its topmost pixel, raster order
+        text = f"{iso.name}: {iso.area_cm2:.0f} cm2"
+        _label(img, text, label_place((u, v, u, v), _label_size(text), img.shape), ISOTHERM_BGR)
 
 
 LEGEND_PX = 150
@@ -313,6 +338,16 @@ class LiveView:
     _cache: dict[tuple[int, str, int | None], Picture] = field(default_factory=dict)
     _videos: dict[str, VideoFrame] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
+    _shapes: tuple[list[LineProfile], list[IsothermArea]] = ([], [])  # the latest measured
+
+    def lines(self) -> dict[str, Any]:
+        """The latest frame's line profiles and isotherm areas (plain data: a dashboard's
+        chart), as its JSON line has them."""
+        lines, isotherms = self._shapes
+        return {
+            "lines": [p.as_dict() for p in lines],
+            "isotherms": [i.as_dict() for i in isotherms],
+        }
 
     def fused(self, fused: FusedFrame, alarms: AlarmTracker | None = None) -> None:
         """A rig's fused frame (its own thread): kept for the screens while someone looks,
@@ -323,6 +358,7 @@ class LiveView:
             hot = fused.hotspots[0].max_c if fused.hotspots else None
             rois = {r.name: (r.max_c if r.n else None) for r in fused.rois}
             self.trend.add(fused.thermal_time_s, hot, rois)
+            self._shapes = (fused.lines, fused.isotherms)  # one reference: no copy per frame
         with self._lock:
             rates = [hz for hz, until in self._wanted.items() if until >= now]
         if not rates or now - self.last_s < 1.0 / max(rates):

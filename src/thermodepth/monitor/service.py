@@ -669,3 +669,8 @@ class Monitor:
         """A rig's readings over the last hour (:mod:`.live`)."""
         runner = self.runners.get(rig)
         return None if runner is None else list(runner.live.trend.points)
+
+    def lines(self, rig: str) -> dict[str, Any] | None:
+        """A rig's latest line profiles and isotherm areas (:meth:`.live.LiveView.lines`)."""
+        runner = self.runners.get(rig)
+        return None if runner is None else runner.live.lines()

@@ -122,7 +122,7 @@ def alarm_message(event: dict[str, Any], fused: FusedFrame) -> dict[str, Any]:
 def measurement_message(fused: FusedFrame) -> dict[str, Any]:
     """A frame's summary as published: time, VOx, the hottest hotspot (max C, centroid m,
     distance m, resolvable), the count of hotspots, each ROI's statistics and the OR of the
-    flags of everything measured."""
+    flags of everything measured; each line's length, max and where, each isotherm's area."""
     hot = fused.hotspots[0] if fused.hotspots else None
     flags = 0
     for item in (*fused.hotspots, *fused.rois):
@@ -142,6 +142,27 @@ def measurement_message(fused: FusedFrame) -> dict[str, Any]:
         "hotspots": len(fused.hotspots),
         "rois": {r.name: {k: v for k, v in r.__dict__.items() if k != "name"} for r in fused.rois},
         "flags": flags,
+        # lines and isotherms (their figures, not the profiles): only when there are some
+        **(
+            {
+                "lines": {
+                    p.name: {k: v for k, v in p.as_dict(profile=False).items() if k != "name"}
+                    for p in fused.lines
+                }
+            }
+            if fused.lines
+            else {}
+        ),
+        **(
+            {
+                "isotherms": {
+                    i.name: {k: v for k, v in i.as_dict().items() if k != "name"}
+                    for i in fused.isotherms
+                }
+            }
+            if fused.isotherms
+            else {}
+        ),
     }
 
 

@@ -26,7 +26,8 @@ function legend(range) {
   return `<div class="legend"><span>${num(range[0], 0)} °C</span><span class="bar"></span><span>${num(range[1], 0)} °C</span></div>
     <div class="legend"><span><i class="swatch" style="background:#008c8c"></i>no depth</span>
     <span><i class="swatch" style="background:#bfbfbf"></i>outside the thermal view</span>
-    <span><i class="swatch" style="background:repeating-linear-gradient(45deg,#1acc1a 0 3px,#777 3px 6px)"></i>hidden</span></div>`;
+    <span><i class="swatch" style="background:repeating-linear-gradient(45deg,#1acc1a 0 3px,#777 3px 6px)"></i>hidden</span>
+    <span><i class="swatch" style="background:#ff00ff"></i>isotherm</span></div>`;
 }
 
 function hottest(rig) {
@@ -202,6 +203,42 @@ function spark(points) {
     <span class="when"><span>${unix ? clock(t0) : `−${ago(t1 - t0)}`}</span><span>${ago(t1 - t0)}</span><span>${unix ? clock(t1) : "last"}</span></span></div>`;
 }
 
+// -- lines and isotherms: a line's temperature against metres along the surface -------------
+
+// A line's profile as a small chart: temperature (°C) against its position (m) along the
+// surface, its hottest point marked, the scale's ends at its right; gaps (no depth or no
+// temperature) left open.
+function profileChart(p) {
+  const pts = p.distance_m.map((d, i) => [d, p.temp_c[i]]);
+  const ok = pts.filter(([d, t]) => Number.isFinite(d) && Number.isFinite(t));
+  if (ok.length < 2) return `<span class="muted">no temperatures along it</span>`;
+  const ts = ok.map(([, t]) => t), lo = Math.floor(Math.min(...ts)), hi = Math.max(Math.ceil(Math.max(...ts)), lo + 1);
+  const len = p.length_m || ok.at(-1)[0] || 1, W = 300, H = 80;
+  const x = (d) => (d / len) * W, y = (t) => H - 3 - ((t - lo) / (hi - lo)) * (H - 6);
+  const runs = []; let run = [];
+  for (const [d, t] of pts) {
+    if (Number.isFinite(d) && Number.isFinite(t)) run.push(`${x(d).toFixed(1)},${y(t).toFixed(1)}`);
+    else if (run.length) { runs.push(run); run = []; }
+  }
+  if (run.length) runs.push(run);
+  const lines = runs.map((r) => `<polyline points="${r.join(" ")}"/>`).join("");
+  const mark = Number.isFinite(p.max_at_m) ? `<circle class="max" cx="${x(p.max_at_m).toFixed(1)}" cy="${y(p.max_c).toFixed(1)}" r="3"/>` : "";
+  return `<div class="trend profile"><svg class="spark" viewBox="0 0 ${W} ${H}" preserveAspectRatio="none" role="img"
+      aria-label="${esc(p.name)}: ${num(lo)} to ${num(hi)} °C over ${num(len)} m">${lines}${mark}</svg>
+    <span class="hi">${num(hi)} °C</span><span class="lo">${num(lo)} °C</span>
+    <span class="when"><span>0 m</span><span></span><span>${num(len)} m</span></span></div>`;
+}
+
+function linesTable(shapes) {
+  const lines = shapes.lines.map((p) => `<tr data-line="${esc(p.name)}"><td>${esc(p.name)}</td><td>${num(p.max_c)} °C at ${num(p.max_at_m)} m</td>
+    <td>${num(p.length_m)} m${p.gap_px ? ` <span class="muted">(${p.gap_px} px without a reading)</span>` : ""}</td><td>${profileChart(p)}</td></tr>`).join("");
+  const isos = shapes.isotherms.map((i) => `<tr data-isotherm="${esc(i.name)}"><td>${esc(i.name)}</td><td>above ${num(i.above_c)} °C</td>
+    <td>${num(i.area_cm2)} cm²</td><td>${i.n ? `max ${num(i.max_c)} °C` : ""}</td></tr>`).join("");
+  if (!lines && !isos) return "";
+  return `<table>${lines ? `<tr><th>line</th><th>hottest</th><th>length</th><th>°C along it</th></tr>${lines}` : ""}
+    ${isos ? `<tr><th>isotherm</th><th>band</th><th>area on the surface</th><th></th></tr>${isos}` : ""}</table>`;
+}
+
 async function rigPage() {
   const name = decodeURIComponent(location.pathname.slice("/rig/".length));
   document.title = `thermodepth · ${name}`;
@@ -210,6 +247,7 @@ async function rigPage() {
     <div>${picFrame("thermal", "thermal image", "thermal")}<div id="reading"></div>
     <h3>Alarms</h3><div id="alarms"></div></div></div>
     <h3>Regions of interest</h3><div class="scroll"><table id="rois"></table></div>
+    <div class="scroll" id="lines"></div>
     <h3>Recent events</h3><div class="scroll"><table id="events"></table></div>`;
   const q = encodeURIComponent(name);
   const pictures = [livePicture(document.querySelector(".pic.wide"), `/api/rigs/${q}/overlay.jpg`),
@@ -233,6 +271,8 @@ async function rigPage() {
       <td>${num(s.max_c)}</td><td>${num(s.mean_c)}</td><td>${num(s.min_c)}</td>
       <td>${spark(trend.map((t) => ({ time_s: t.time_s, value: t.rois[roi] ?? null })))}</td></tr>`).join("");
     document.getElementById("rois").innerHTML = `<tr><th>ROI</th><th>max °C</th><th>mean °C</th><th>min °C</th><th>max, last hour</th></tr>${rows}`;
+    const shapes = await api(`/api/rigs/${q}/lines`);
+    document.getElementById("lines").innerHTML = shapes.ok ? linesTable(await shapes.json()) : "";
     const events = await json(`/api/events?rig=${q}&limit=20`);
     document.getElementById("events").innerHTML = eventRows(events);
   };
