@@ -390,7 +390,7 @@ def test_help_reads_as_text(command: str) -> None:
     words = " ".join(result.output.split())
     # a help text wrapped at words reads whole once the line breaks are joined
     helps = {
-        "run": "Write measurements.jsonl, alarms.jsonl and hotspots.csv here.",
+        "run": "hotspots.csv here (with line or isotherm ROIs, lines.csv and isotherms.csv too).",
         "record": "Replace an existing recording (nothing else).",
         "calibrate": "Hold the depth camera's intrinsics fixed: a calibration file (its depth",
         "fit-compensation": "paper: the reference temperature (C) to fit at (default 39 if",

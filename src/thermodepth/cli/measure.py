@@ -179,7 +179,10 @@ def run_cmd(
     out: Annotated[
         Path | None,
         typer.Option(
-            "-o", "--out", help="Write measurements.jsonl, alarms.jsonl and hotspots.csv here."
+            "-o",
+            "--out",
+            help="Write measurements.jsonl, alarms.jsonl and hotspots.csv here (with line or "
+            "isotherm ROIs, lines.csv and isotherms.csv too).",
         ),
     ] = None,
     max_skew_ms: MaxSkewMs = 20.0,
