@@ -41,6 +41,7 @@ from .failsafe import STORAGE_FAULT, Fault
 from .live import Picture, VideoFrame
 from .logs import apply_levels, logger
 from .outputs import OUTPUT_BUILDERS, Output, OutputContext, RigEntities, build_outputs
+from .readings import MinuteReadings, minute_of
 from .rig import RigSink, quantiles
 from .storage import CLIPS, Retention, free_bytes
 from .store import EventStore, counts_by_rig
@@ -94,6 +95,7 @@ class Monitor:
         self._storage_fault = Fault(STORAGE_FAULT, "disk")
         self._storage_lines: list[str] = []
         self._output_errors: dict[str, float] = {}
+        self._readings: dict[str, MinuteReadings] = {}  # each rig's minute so far
         self._build(config)
 
     # -- parts ---------------------------------------------------------------------------------
@@ -154,9 +156,34 @@ class Monitor:
         )
 
     def measured(self, sink: RigSink, fused: FusedFrame) -> None:
-        """A rig's fused frame: to every output (each keeps its own rate)."""
+        """A rig's fused frame: into its readings of the minute (:mod:`.readings`), to every
+        output (each keeps its own rate)."""
+        runner = self.runners.get(sink.name)
+        if runner is not None:
+            readings = self._readings.get(sink.name)
+            if readings is None or readings.rois is not runner.live.rois:  # a new runner
+                self._flush_readings(sink.name)
+                readings = MinuteReadings(sink.name, runner.live.rois, self._write_readings)
+                self._readings[sink.name] = readings
+            readings.add(fused, fused.thermal_time_s if runner.wall_clock else time.time())
         for output in self.outputs:
             output.measured(sink.name, fused)
+
+    def _write_readings(self, rows: list[dict[str, Any]]) -> None:
+        try:
+            self.store.add_readings(rows)
+        except sqlite3.Error as exc:  # a full disk: a minute's readings are not kept
+            self.storage_problem(
+                f"{rows[0]['rig']}: readings of {rows[0]['minute_utc']} not written to "
+                f"{self.store.path} ({exc})"
+            )
+
+    def _flush_readings(self, rig: str | None = None) -> None:
+        """Write a rig's (None: every rig's) readings of the minute so far."""
+        for name in list(self._readings) if rig is None else [rig]:
+            readings = self._readings.pop(name, None)
+            if readings is not None:
+                readings.flush()
 
     def _busy(self) -> set[Any]:
         busy = self.evidence.active_folders()
@@ -239,6 +266,7 @@ class Monitor:
         """Everything but the event store stopped (see :meth:`stop`)."""
         for runner in self.runners.values():
             runner.stop()
+        self._flush_readings()
         self.evidence.close()
         for runner in self.runners.values():
             if runner.sink.continuous is not None:
@@ -273,6 +301,7 @@ class Monitor:
         for name, runner in list(self.runners.items()):
             if name not in keep:
                 runner.stop()
+                self._flush_readings(name)
                 gone[name] = self.runners.pop(name)
                 self.log.info("%s: stopped (reload)", name)
         self.config = config
@@ -530,6 +559,8 @@ class Monitor:
         except OSError as exc:
             low = f"{self.config.storage.path}: cannot sweep ({exc.strerror or exc})"
         self._flush_backlog()
+        oldest_s = time.time() - self.config.storage.retention_days * 86400.0
+        self.store.forget_readings(minute_of(oldest_s))
         with self._lock:
             lines, self._storage_lines = self._storage_lines, []
             quiet = not lines and low is None and not self.backlog
