@@ -6,6 +6,7 @@ are the store's."""
 from __future__ import annotations
 
 import base64
+import json
 import re
 import shutil
 import subprocess
@@ -263,3 +264,128 @@ def test_periods() -> None:
     assert span.end_utc == "2026-11-05T11:30:00+00:00"
     with pytest.raises(FieldError, match="to"):
         parse_period("2026-11-05T10:00", "2026-11-05T10:00")
+
+
+# -- scheduled by the monitor -------------------------------------------------------------------
+
+
+class Mailbox:
+    """aiosmtpd's handler: keeps every message."""
+
+    def __init__(self) -> None:
+        self.messages: list[bytes] = []
+
+    async def handle_DATA(self, server: Any, session: Any, envelope: Any) -> str:  # noqa: N802
+        self.messages.append(envelope.content)
+        return "250 OK"
+
+
+def test_the_monitor_makes_sends_keeps_and_deletes_its_reports(
+    monitored: dict[str, Any],
+) -> None:
+    pytest.importorskip("aiosmtpd", reason="the e-mail test's SMTP server is aiosmtpd")
+    import email
+    import socket
+
+    import yaml
+    from aiosmtpd.controller import Controller
+
+    from test_monitor_notify import SECRET, Receiver
+    from thermodepth.monitor import Monitor, load_config
+    from thermodepth.monitor.storage import Retention
+
+    folder = monitored["folder"]
+    hook = Receiver()
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    box = Mailbox()
+    smtp = Controller(box, hostname="127.0.0.1", port=port)
+    smtp.start()
+    (folder / "hook.key").write_text(SECRET + "\n", encoding="utf-8")
+    data = yaml.safe_load(monitored["config"].read_text(encoding="utf-8"))
+    data["http"]["public_url"] = "https://monitor.example/thermo"
+    data["notify"] = [
+        {"kind": "webhook", "name": "ops", "url": hook.url(), "secret_file": "hook.key"},
+        {"kind": "email", "name": "desk", "smtp": f"127.0.0.1:{port}", "starttls": False,
+         "from": "monitor@plant.example", "to": ["maintenance@plant.example"]},
+    ]  # fmt: skip
+    data["reports"] = [
+        {"every": "month", "to": "ops"},
+        {"every": "month", "to": "email:desk", "format": "html"},
+    ]
+    monitored["config"].write_text(yaml.safe_dump(data), encoding="utf-8")
+    monitor = Monitor(load_config(monitored["config"]))
+    now_s = datetime_s("2026-12-01T00:30:00+00:00")
+    monitor.reports.started_s = now_s
+    try:
+        made = monitor.reports.run(now_s)
+        names = sorted(p.name for p in made)
+        assert names == ["20261201T000000Z-month.html", "20261201T000000Z-month.pdf"]
+        pdf, page = sorted(made, key=lambda p: p.suffix != ".pdf")
+        if POPPLER:
+            check_values(" ".join(pdf_text(pdf).split("\n")), monitored["ids"])
+        # the webhook: one signed POST naming the file, with its link
+        [request] = hook.requests()
+        assert request["ok"] and request["id"] == f"report-{pdf.name}"
+        told = json.loads(request["body"])["report"]
+        assert told["file"] == pdf.name and told["path"] == str(pdf)
+        assert told["period"] == "2026-11-01 to 2026-11-30 (UTC)"
+        assert told["summary"] == "1 rigs, 4 events"
+        assert told["link"] == f"https://monitor.example/thermo/api/reports/{pdf.name}"
+        # the e-mail: the HTML attached, byte for byte
+        [raw] = box.messages
+        message = email.message_from_bytes(raw)
+        assert "inspection report 2026-11-01 to 2026-11-30" in message["Subject"]
+        [attached] = [p for p in message.walk() if p.get_filename() == page.name]
+        assert attached.get_payload(decode=True) == page.read_bytes()
+        # looked again: nothing made or sent twice; the route serves only kept reports' names
+        assert monitor.reports.run(now_s + 60) == []
+        assert len(hook.requests()) == 1 and len(box.messages) == 1
+        assert monitor.reports.status()["sent"] == 2
+        assert monitor.report_file(pdf.name) == pdf
+        assert monitor.report_file("../events.sqlite") is None
+        # the storage rule: gone with their markers once older than retention_days (30)
+        rule = Retention(monitor.config.storage, set, lambda clip: None)
+        rule.sweep(now_s + 29 * 86400)
+        assert pdf.exists() and page.exists()
+        rule.sweep(now_s + 31 * 86400)
+        assert not any((folder / "store" / "reports").iterdir())
+        assert rule.deleted["reports"] == 4  # two reports, two markers
+    finally:
+        monitor.stop()
+        smtp.stop()
+        hook.close()
+
+
+def datetime_s(text: str) -> float:
+    from datetime import datetime
+
+    return datetime.fromisoformat(text).timestamp()
+
+
+def test_a_report_to_an_unknown_target_is_one_line(monitored: dict[str, Any]) -> None:
+    import yaml
+
+    from thermodepth.errors import InputError
+    from thermodepth.monitor import load_config
+
+    data = yaml.safe_load(monitored["config"].read_text(encoding="utf-8"))
+    data["reports"] = [{"every": "week", "to": "nobody"}]
+    monitored["config"].write_text(yaml.safe_dump(data), encoding="utf-8")
+    with pytest.raises(InputError, match=r"reports\.0\.to: 'nobody': no notify target"):
+        load_config(monitored["config"])
+
+
+def test_the_periods_just_ended() -> None:
+    from datetime import datetime, timezone
+
+    from thermodepth.monitor.reports import last_period
+
+    now = datetime(2026, 11, 26, 9, 15, tzinfo=timezone.utc)  # a Thursday
+    assert last_period("day", now).label() == "2026-11-25 (UTC)"
+    assert last_period("week", now).label() == "2026-11-16 to 2026-11-22 (UTC)"
+    assert last_period("month", now).label() == "2026-10-01 to 2026-10-31 (UTC)"
+    assert last_period("month", datetime(2027, 1, 1, tzinfo=timezone.utc)).label() == (
+        "2026-12-01 to 2026-12-31 (UTC)"
+    )

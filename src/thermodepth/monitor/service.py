@@ -35,15 +35,16 @@ from ..alarms import RAISED, event_line
 from ..io.measurements import jsonable
 from ..pipeline import FusedFrame
 from .bounded import GIVE_BACK_S, give_back_memory
-from .config import MONITOR, MonitorConfig, RigConfig
+from .config import MONITOR, MonitorConfig, RigConfig, report_target
 from .evidence import Evidence
 from .failsafe import STORAGE_FAULT, Fault
 from .live import Picture, VideoFrame
 from .logs import apply_levels, logger
 from .outputs import OUTPUT_BUILDERS, Output, OutputContext, RigEntities, build_outputs
 from .readings import MinuteReadings, minute_of
+from .reports import REPORT_NAME, Reports
 from .rig import RigSink, quantiles
-from .storage import CLIPS, Retention, free_bytes
+from .storage import CLIPS, REPORTS, Retention, free_bytes
 from .store import EventStore, counts_by_rig
 from .supervisor import AckRefusedError, ClipNotReadyError, RigRunner
 from .systemd import notify, watchdog_interval_s
@@ -81,7 +82,8 @@ class Monitor:
         self.log = logger()
         apply_levels(config.log.level, config.log.rigs)
         self.started_mono = time.monotonic()
-        self.started_utc = utc_of(time.time())
+        self.started_s = time.time()
+        self.started_utc = utc_of(self.started_s)
         self.store = EventStore(config.storage.path / STORE_NAME)
         self.backlog: list[dict[str, Any]] = []  # events the store could not take yet
         self.events_lost = 0  # ... and dropped, oldest first, past BACKLOG_MAX
@@ -115,6 +117,9 @@ class Monitor:
         self.workers.add(Worker("clock", self._clock, TICK_S, CLOCK_LIMIT_S, self.log))
         self.workers.add(Worker("storage", self._sweeper, SWEEP_S, SWEEP_LIMIT_S, self.log))
         self.workers.add(self.evidence.painter)
+        self.reports = Reports(config, self._report_target, self.started_s)
+        if config.reports:
+            self.workers.add(self.reports.worker)
         for output in self.outputs:
             for worker in output.workers():
                 self.workers.add(worker)
@@ -138,6 +143,18 @@ class Monitor:
         return [
             RigEntities.of(r.name, r.config.location, r.settings) for r in self.runners.values()
         ]
+
+    def _report_target(self, name: str) -> Any:
+        """The notify output a scheduled report goes to (None: none of that name)."""
+        target = report_target(self.config, name)
+        return None if target is None else self.output(target.target_name())
+
+    def report_file(self, name: str) -> Path | None:
+        """A kept scheduled report by its file's name (None: no such name or file)."""
+        if not REPORT_NAME.fullmatch(name):
+            return None
+        path = self.config.storage.path / REPORTS / name
+        return path if path.is_file() else None
 
     def output(self, name: str) -> Output | None:
         """The output of that name (``mqtt``, ``opcua``, ...), None when not configured."""
@@ -623,6 +640,7 @@ class Monitor:
                 "deleted": dict(self.retention.deleted),
                 "fault": self._storage_fault.raised,
             },
+            "reports": self.reports.status() if self.config.reports else None,
             "mqtt": None if mqtt is None else mqtt.status(),
             "mjpeg": None if self.http is None else self.http.streams.status(),
             "event_counts": counts_by_rig(self.event_counts),
