@@ -389,3 +389,31 @@ def test_the_periods_just_ended() -> None:
     assert last_period("month", datetime(2027, 1, 1, tzinfo=timezone.utc)).label() == (
         "2026-12-01 to 2026-12-31 (UTC)"
     )
+
+
+def test_a_running_monitor_keeps_its_readings_a_row_a_minute(tmp_path: Path) -> None:
+    from monitor_helpers import FLAPPING, settings_file, wait_for
+
+    from thermodepth.monitor import Monitor, load_config
+
+    rois = "rois:\n  - {name: left, rect: [0, 0, 320, 480]}\n"
+    settings = settings_file(tmp_path, FLAPPING + rois)
+    config = monitor_config(tmp_path, [{"name": "sim1", "source": "sim",
+                                        "settings": settings.name}])  # fmt: skip
+    monitor = Monitor(load_config(config))
+    monitor.start()
+    try:
+        wait_for(lambda: monitor.status()["rigs"][0]["frames"] >= 20)
+    finally:
+        monitor.stop()  # the minute so far is written at the stop
+    frames = monitor.status()["rigs"][0]["frames"]
+    store = EventStore(tmp_path / "store" / STORE_NAME)
+    rows = store.readings("2000-01-01", "2100-01-01")
+    store.close()
+    assert {r["roi"] for r in rows} <= {"*", "left"} and rows
+    hottest = [r for r in rows if r["roi"] == "*"]
+    assert 20 <= sum(r["frames"] for r in hottest) <= frames
+    # the simulated chip (70 C at 1 m) reads 67.42-67.59 C (monitor_helpers.FLAPPING)
+    assert all(67.3 <= r["min_c"] <= r["mean_c"] <= r["max_c"] <= 67.7 for r in hottest)
+    assert all(r["rig"] == "sim1" and r["minute_utc"].endswith(":00+00:00") for r in rows)
+    assert all(0.5 < r["distance_m"] < 2.0 for r in hottest)
