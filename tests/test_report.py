@@ -393,7 +393,6 @@ def test_the_periods_just_ended() -> None:
 
 def test_a_running_monitor_keeps_its_readings_a_row_a_minute(tmp_path: Path) -> None:
     from monitor_helpers import FLAPPING, settings_file, wait_for
-
     from thermodepth.monitor import Monitor, load_config
 
     rois = "rois:\n  - {name: left, rect: [0, 0, 320, 480]}\n"

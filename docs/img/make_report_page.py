@@ -24,10 +24,11 @@ rois:
   - {name: chip, rect: [560, 280, 720, 440]}
   - {name: panel, rect: [400, 200, 880, 520], emissivity: 0.9}
 alarms:
-  - {name: hot, above_c: 67.48}
+  - {name: hot, above_c: 60, latch: true}
+  - {name: chip-warm, what: chip, level: warning, above_c: 67.58, clear_below_c: 67.4}
 """
 OUT = Path(__file__).resolve().parent / "report-page.png"
-RUN_S = 150  # three minutes of readings (the first and last partial)
+RUN_S = 130  # three minutes of readings (the first and last partial)
 
 
 def main() -> None:
