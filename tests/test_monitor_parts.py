@@ -458,10 +458,11 @@ def test_retention_by_age_then_free_space_continuous_first(tmp_path: Path) -> No
     assert not seg1.exists() and not seg2.exists() and not clip1.exists()
     assert clip2.exists() and busy.exists()  # 5 GB free: enough; being written: kept
     assert deleted == [f"a/{old_clip.name}", f"a/{clip1.name}"]
-    assert rule.deleted == {"continuous": 3, "clips": 2}
+    assert rule.deleted == {"continuous": 3, "clips": 2, "reports": 0}
     free["bytes"] = -(10**10)  # a disk that fills anyway
     line = rule.sweep(now)
-    assert line is not None and "less than min_free_gb 4.5, and no recording or clip left" in line
+    assert line is not None
+    assert "less than min_free_gb 4.5, and no recording, clip or report left" in line
     assert not clip2.exists() and busy.exists()
 
 

@@ -24,5 +24,7 @@ module                 use cases
 :mod:`.demo`           ``run_demo``: the whole story on the simulated rig
 :mod:`.monitor`        ``run_monitor`` (the always-on monitor of a config, until stopped),
                        ``describe_config`` (``monitor --check``)
+:mod:`.report`         ``make_report`` (the inspection report of a period from a monitor's
+                       event store and readings; drawn by :mod:`.report_render`)
 =====================  ======================================================================
 """

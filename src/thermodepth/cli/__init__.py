@@ -8,7 +8,7 @@ the app, the error handling and the shared options.
 """
 
 # in this order: the commands are listed in `thermodepth --help` as they are registered
-from . import batch, calibrate, compensation, measure, monitor, ros, simulate, thermal_map
+from . import batch, calibrate, compensation, measure, monitor, report, ros, simulate, thermal_map
 from .base import app
 from .measure import print_frame
 
@@ -21,6 +21,7 @@ __all__ = [
     "measure",
     "monitor",
     "print_frame",
+    "report",
     "ros",
     "simulate",
     "thermal_map",

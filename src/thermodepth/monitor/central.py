@@ -426,6 +426,10 @@ class CentralDashboard:
         """The snapshot, when one was kept: the clip and cloud stay on the monitor's disk."""
         return ["snapshot.png"] if self._snapshot_path(event["id"]).exists() else []
 
+    def report_file(self, name: str) -> Path | None:
+        """A central dashboard keeps no inspection reports (each monitor keeps its own)."""
+        return None
+
     def evidence_file(self, event_id: int, what: str) -> Path | None:
         path = self._snapshot_path(event_id)
         return path if what == "snapshot.png" and path.exists() else None

@@ -272,6 +272,17 @@ class LogConfig(StrictSchema):
     rigs: dict[str, Level] = Field(default_factory=dict)
 
 
+class ReportSchedule(StrictSchema):
+    """An inspection report the monitor makes by itself (``reports:``; :mod:`.reports`):
+    ``every`` ``day``, ``week`` (Monday to Sunday) or ``month`` (UTC), for the period just
+    ended; ``to`` (a ``notify`` target's name, ``NAME`` or ``KIND:NAME``; none: only kept under
+    the storage path); ``format`` ``pdf`` or ``html``."""
+
+    every: Literal["day", "week", "month"]
+    to: str | None = None
+    format: Literal["pdf", "html"] = "pdf"
+
+
 class MonitorConfig(StrictSchema):
     """The whole file (module docstring)."""
 
@@ -284,6 +295,7 @@ class MonitorConfig(StrictSchema):
     notify: list[NotifyConfig] = Field(default_factory=list)
     mjpeg: MjpegConfig = MjpegConfig()  # live video
     rtsp: RtspConfig | None = None  # live video
+    reports: list[ReportSchedule] = Field(default_factory=list)
     failsafe: FailsafeConfig = FailsafeConfig()
     log: LogConfig = LogConfig()
 
@@ -443,6 +455,7 @@ def config_problems(config: MonitorConfig) -> list[str]:
     problems.extend(_modbus_problems(config))
     problems.extend(notify_problems(config))
     problems.extend(_rtsp_problems(config.rtsp))  # live video
+    problems.extend(report_problems(config))
     names = {r.name for r in config.rigs}
     problems.extend(
         f"log.rigs.{rig}: no rig of that name ({', '.join(sorted(names))})"
@@ -633,6 +646,25 @@ def _notify_resolved(
     return target.model_copy(
         update={k: _relative(base, getattr(target, k)) for k in keys if hasattr(target, k)}
     )
+
+
+def report_target(config: MonitorConfig, name: str) -> WebhookConfig | EmailConfig | None:
+    """The ``notify`` target a report goes to: by ``KIND:NAME`` or by its ``NAME``."""
+    return next(
+        (t for t in config.notify if name in (t.target_name(), t.target_name().split(":", 1)[1])),
+        None,
+    )
+
+
+def report_problems(config: MonitorConfig) -> list[str]:
+    """A scheduled report sent to a target that is not in ``notify``."""
+    problems = []
+    names = [t.target_name() for t in config.notify]
+    for i, r in enumerate(config.reports):
+        if r.to is not None and report_target(config, r.to) is None:
+            known = ", ".join(names) or "none"
+            problems.append(f"reports.{i}.to: {r.to!r}: no notify target of that name ({known})")
+    return problems
 
 
 def notify_problems(config: MonitorConfig) -> list[str]:

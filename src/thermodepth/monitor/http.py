@@ -32,6 +32,8 @@ route                                      what
 ``GET /api/rigs/RIG/lines``                its latest line profiles (temperature against
                                            metres along the surface) and isotherm areas;
                                            404 no such rig (or a central dashboard's)
+``GET /api/reports/FILE``                  a scheduled inspection report (PDF or HTML) by
+                                           its file's name (404: not kept)
 ``POST /api/ack``                          acknowledge ``{"rig", "rule", "by"}``: 200 with
                                            its events, 404 no such rig or rule, 409 not
                                            raised, 403 a forged request
@@ -134,6 +136,7 @@ class Monitor(Protocol):
     def trend(self, rig: str) -> list[dict[str, Any]] | None: ...
 
     def lines(self, rig: str) -> dict[str, Any] | None: ...
+    def report_file(self, name: str) -> Path | None: ...
 
     def acknowledge(self, rig: str, rule: str, by: str) -> list[dict[str, Any]]: ...
 
@@ -406,6 +409,19 @@ def build_app(monitor: Monitor, auth: Auth, streams: Streams | None = None) -> S
                                 background=BackgroundTask(packed.unlink))  # fmt: skip
         return FileResponse(path, media_type=EVIDENCE[what], filename=name)
 
+    def report(request: Request) -> Response:
+        """
+        responses:
+          200: {description: "a scheduled inspection report (PDF or HTML) by its file's name"}
+          404: {description: no such report kept}
+        """
+        name = request.path_params["name"]
+        path = monitor.report_file(name)
+        if path is None:
+            return _error("no such report kept", 404)
+        media = "application/pdf" if path.suffix == ".pdf" else "text/html; charset=utf-8"
+        return FileResponse(path, media_type=media, filename=name)
+
     def picture(request: Request) -> Response:
         """
         parameters:
@@ -589,6 +605,7 @@ def build_app(monitor: Monitor, auth: Auth, streams: Streams | None = None) -> S
         Route("/api/events", events),
         Route("/api/events/{id:int}", event),
         Route("/api/events/{id:int}/{what}", evidence),
+        Route("/api/reports/{name}", report),
         Route("/api/rigs/{rig:path}/trend", trend),  # a central dashboard's rigs: EDGE/RIG
         Route("/api/rigs/{rig:path}/lines", lines),
         Route("/api/rigs/{rig:path}/stream.mjpeg", stream),

@@ -35,14 +35,16 @@ from ..alarms import RAISED, event_line
 from ..io.measurements import jsonable
 from ..pipeline import FusedFrame
 from .bounded import GIVE_BACK_S, give_back_memory
-from .config import MONITOR, MonitorConfig, RigConfig
+from .config import MONITOR, MonitorConfig, RigConfig, report_target
 from .evidence import Evidence
 from .failsafe import STORAGE_FAULT, Fault
 from .live import Picture, VideoFrame
 from .logs import apply_levels, logger
 from .outputs import OUTPUT_BUILDERS, Output, OutputContext, RigEntities, build_outputs
+from .readings import MinuteReadings, minute_of
+from .reports import REPORT_NAME, Reports
 from .rig import RigSink, quantiles
-from .storage import CLIPS, Retention, free_bytes
+from .storage import CLIPS, REPORTS, Retention, free_bytes
 from .store import EventStore, counts_by_rig
 from .supervisor import AckRefusedError, ClipNotReadyError, RigRunner
 from .systemd import notify, watchdog_interval_s
@@ -80,7 +82,8 @@ class Monitor:
         self.log = logger()
         apply_levels(config.log.level, config.log.rigs)
         self.started_mono = time.monotonic()
-        self.started_utc = utc_of(time.time())
+        self.started_s = time.time()
+        self.started_utc = utc_of(self.started_s)
         self.store = EventStore(config.storage.path / STORE_NAME)
         self.backlog: list[dict[str, Any]] = []  # events the store could not take yet
         self.events_lost = 0  # ... and dropped, oldest first, past BACKLOG_MAX
@@ -94,6 +97,7 @@ class Monitor:
         self._storage_fault = Fault(STORAGE_FAULT, "disk")
         self._storage_lines: list[str] = []
         self._output_errors: dict[str, float] = {}
+        self._readings: dict[str, MinuteReadings] = {}  # each rig's minute so far
         self._build(config)
 
     # -- parts ---------------------------------------------------------------------------------
@@ -113,6 +117,9 @@ class Monitor:
         self.workers.add(Worker("clock", self._clock, TICK_S, CLOCK_LIMIT_S, self.log))
         self.workers.add(Worker("storage", self._sweeper, SWEEP_S, SWEEP_LIMIT_S, self.log))
         self.workers.add(self.evidence.painter)
+        self.reports = Reports(config, self._report_target, self.started_s)
+        if config.reports:
+            self.workers.add(self.reports.worker)
         for output in self.outputs:
             for worker in output.workers():
                 self.workers.add(worker)
@@ -137,6 +144,18 @@ class Monitor:
             RigEntities.of(r.name, r.config.location, r.settings) for r in self.runners.values()
         ]
 
+    def _report_target(self, name: str) -> Any:
+        """The notify output a scheduled report goes to (None: none of that name)."""
+        target = report_target(self.config, name)
+        return None if target is None else self.output(target.target_name())
+
+    def report_file(self, name: str) -> Path | None:
+        """A kept scheduled report by its file's name (None: no such name or file)."""
+        if not REPORT_NAME.fullmatch(name):
+            return None
+        path = self.config.storage.path / REPORTS / name
+        return path if path.is_file() else None
+
     def output(self, name: str) -> Output | None:
         """The output of that name (``mqtt``, ``opcua``, ...), None when not configured."""
         return next((o for o in self.outputs if o.name == name), None)
@@ -154,9 +173,34 @@ class Monitor:
         )
 
     def measured(self, sink: RigSink, fused: FusedFrame) -> None:
-        """A rig's fused frame: to every output (each keeps its own rate)."""
+        """A rig's fused frame: into its readings of the minute (:mod:`.readings`), to every
+        output (each keeps its own rate)."""
+        runner = self.runners.get(sink.name)
+        if runner is not None:
+            readings = self._readings.get(sink.name)
+            if readings is None or readings.rois is not runner.live.rois:  # a new runner
+                self._flush_readings(sink.name)
+                readings = MinuteReadings(sink.name, runner.live.rois, self._write_readings)
+                self._readings[sink.name] = readings
+            readings.add(fused, fused.thermal_time_s if runner.wall_clock else time.time())
         for output in self.outputs:
             output.measured(sink.name, fused)
+
+    def _write_readings(self, rows: list[dict[str, Any]]) -> None:
+        try:
+            self.store.add_readings(rows)
+        except sqlite3.Error as exc:  # a full disk: a minute's readings are not kept
+            self.storage_problem(
+                f"{rows[0]['rig']}: readings of {rows[0]['minute_utc']} not written to "
+                f"{self.store.path} ({exc})"
+            )
+
+    def _flush_readings(self, rig: str | None = None) -> None:
+        """Write a rig's (None: every rig's) readings of the minute so far."""
+        for name in list(self._readings) if rig is None else [rig]:
+            readings = self._readings.pop(name, None)
+            if readings is not None:
+                readings.flush()
 
     def _busy(self) -> set[Any]:
         busy = self.evidence.active_folders()
@@ -239,6 +283,7 @@ class Monitor:
         """Everything but the event store stopped (see :meth:`stop`)."""
         for runner in self.runners.values():
             runner.stop()
+        self._flush_readings()
         self.evidence.close()
         for runner in self.runners.values():
             if runner.sink.continuous is not None:
@@ -273,6 +318,7 @@ class Monitor:
         for name, runner in list(self.runners.items()):
             if name not in keep:
                 runner.stop()
+                self._flush_readings(name)
                 gone[name] = self.runners.pop(name)
                 self.log.info("%s: stopped (reload)", name)
         self.config = config
@@ -530,6 +576,8 @@ class Monitor:
         except OSError as exc:
             low = f"{self.config.storage.path}: cannot sweep ({exc.strerror or exc})"
         self._flush_backlog()
+        oldest_s = time.time() - self.config.storage.retention_days * 86400.0
+        self.store.forget_readings(minute_of(oldest_s))
         with self._lock:
             lines, self._storage_lines = self._storage_lines, []
             quiet = not lines and low is None and not self.backlog
@@ -592,6 +640,7 @@ class Monitor:
                 "deleted": dict(self.retention.deleted),
                 "fault": self._storage_fault.raised,
             },
+            "reports": self.reports.status() if self.config.reports else None,
             "mqtt": None if mqtt is None else mqtt.status(),
             "mjpeg": None if self.http is None else self.http.streams.status(),
             "event_counts": counts_by_rig(self.event_counts),

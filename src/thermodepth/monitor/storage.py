@@ -6,9 +6,11 @@ background thread that drops rather than stalls a live rig (``RecorderSink``'s r
 that cannot be written or closed (a full disk) is told through ``on_fault`` and no segment
 is tried again for :data:`RETRY_S`.
 
-:class:`Retention` deletes, oldest first, what is older than ``retention_days``, then, while
-less than ``min_free_gb`` is free, continuous segments and only then clips (the event rows
-always stay; the events of a deleted clip say so). What is being written is never deleted.
+:class:`Retention` deletes, oldest first, what is older than ``retention_days`` (segments,
+clips, the scheduled reports of ``STORAGE/reports/``), then, while less than ``min_free_gb``
+is free, continuous segments, then clips, and only then reports (the event rows always stay;
+the events of a deleted clip say so). What is being written is never deleted. (The readings'
+rows go by age too: the monitor's sweep, :mod:`.store`.)
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from ..sinks.base import RunContext, SessionResult, closing_attrs
 from .config import StorageConfig
 
 RETRY_S = 30.0
-CLIPS, CONTINUOUS = "clips", "continuous"
+CLIPS, CONTINUOUS, REPORTS = "clips", "continuous", "reports"
 GB = 1e9
 
 
@@ -158,15 +160,17 @@ class Retention:
     ) -> None:
         self.config, self.active, self.clip_deleted = config, active, clip_deleted
         self.free_bytes = free_bytes or (lambda p: shutil.disk_usage(p).free)
-        self.deleted: dict[str, int] = {CONTINUOUS: 0, CLIPS: 0}
+        self.deleted: dict[str, int] = {CONTINUOUS: 0, CLIPS: 0, REPORTS: 0}
 
     def _items(self, kind: str) -> list[tuple[float, Path]]:
-        """(start, path) of the segments or clips, oldest first."""
+        """(start, path) of the segments or clips (folders, a folder per rig) or reports
+        (files), oldest first."""
         root = self.config.path / kind
         found = []
-        for path in root.glob("*/*") if root.is_dir() else ():
+        pattern, folders = ("*", False) if kind == REPORTS else ("*/*", True)
+        for path in root.glob(pattern) if root.is_dir() else ():
             started = _started_s(path)
-            if started is not None and path.is_dir():
+            if started is not None and path.is_dir() == folders:
                 found.append((started, path))
         return sorted(found)
 
@@ -175,7 +179,10 @@ class Retention:
         # next sweep, and no event points at a clip that is gone without saying so
         if kind == CLIPS:
             self.clip_deleted(f"{path.parent.name}/{path.name}")
-        shutil.rmtree(path, ignore_errors=True)
+        if kind == REPORTS:
+            path.unlink(missing_ok=True)
+        else:
+            shutil.rmtree(path, ignore_errors=True)
         self.deleted[kind] += 1
 
     def sweep(self, now_s: float | None = None) -> str | None:
@@ -186,7 +193,7 @@ class Retention:
         busy = self.active()
         oldest = now_s - c.retention_days * 86400.0
         queue = []
-        for kind in (CONTINUOUS, CLIPS):
+        for kind in (CONTINUOUS, CLIPS, REPORTS):
             for started, path in self._items(kind):
                 if path in busy:
                     continue
@@ -201,9 +208,9 @@ class Retention:
                 free = self.free_bytes(c.path) / GB
                 return (
                     f"{c.path}: {free:.2f} GB free, less than min_free_gb {c.min_free_gb:g}, "
-                    "and no recording or clip left to delete"
+                    "and no recording, clip or report left to delete"
                 )
-            kind, path = queue.pop(0)  # continuous segments first, then clips
+            kind, path = queue.pop(0)  # continuous segments first, then clips, then reports
             self._delete(kind, path)
         return None
 

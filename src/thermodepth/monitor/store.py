@@ -8,6 +8,10 @@ The schema is versioned (SQLite's ``user_version``) and migrated on open: each e
 :data:`MIGRATIONS` takes a file from one version to the next, in one transaction. A file of a
 newer version than this program knows is refused with one line. Rows are never deleted by
 the monitor (the storage rule deletes recordings and clips, not events).
+
+The readings: each rig's ROIs a row a minute (``max_c``, ``mean_c``, ``min_c`` over the
+minute's frames, C; ``distance_m``, the ROI's median distance, m; :mod:`.readings`), deleted
+by age with the storage's ``retention_days``; what the inspection report's trends are made of.
 """
 
 from __future__ import annotations
@@ -63,6 +67,22 @@ MIGRATIONS: tuple[str, ...] = (
     DROP TABLE outbox;
     ALTER TABLE deliveries RENAME TO outbox;
     """,
+    # the readings of each rig's ROIs, a row per ROI per minute (reports' trends); the
+    # storage rule deletes them by age
+    """
+    CREATE TABLE readings (
+        rig TEXT NOT NULL,
+        roi TEXT NOT NULL,
+        minute_utc TEXT NOT NULL,
+        max_c REAL,
+        mean_c REAL,
+        min_c REAL,
+        frames INTEGER NOT NULL,
+        distance_m REAL,
+        PRIMARY KEY (rig, roi, minute_utc)
+    ) WITHOUT ROWID;
+    CREATE INDEX readings_by_minute ON readings (minute_utc);
+    """,
 )
 """Version N+1 of the schema from version N (the first: from an empty file)."""
 
@@ -70,6 +90,8 @@ COLUMNS = (
     *("rig", "rule", "level", "state", "time_utc", "time_s", "frame", "value_c"),
     *("condition", "fault", "clip", "by", "at_utc", "origin"),
 )
+
+READING_COLUMNS = ("rig", "roi", "minute_utc", "max_c", "mean_c", "min_c", "frames", "distance_m")
 
 
 class EventStore:
@@ -215,6 +237,42 @@ class EventStore:
         """The events whose clip the storage rule deleted say so."""
         with self._lock:
             self.db.execute("UPDATE events SET clip_kept = 0 WHERE clip = ?", (clip,))
+
+    def events_between(self, start_utc: str, end_utc: str) -> list[dict[str, Any]]:
+        """The events of ``start_utc`` <= ``time_utc`` < ``end_utc`` (ISO 8601 UTC, as
+        stored), oldest first."""
+        return self._rows(
+            "SELECT id, body, clip_kept FROM events WHERE time_utc >= ? AND time_utc < ? "
+            "ORDER BY time_utc, id",
+            [start_utc, end_utc],
+        )
+
+    def add_readings(self, rows: Sequence[Mapping[str, Any]]) -> None:
+        """Readings (each a dict of the readings table's columns); a minute written again
+        replaces the one there."""
+        with self._lock:
+            self.db.executemany(
+                f"INSERT OR REPLACE INTO readings ({', '.join(READING_COLUMNS)}) "
+                f"VALUES ({', '.join('?' * len(READING_COLUMNS))})",
+                [[row.get(k) for k in READING_COLUMNS] for row in rows],
+            )
+
+    def readings(self, start_utc: str, end_utc: str) -> list[dict[str, Any]]:
+        """The readings of the minutes ``start_utc`` <= ``minute_utc`` < ``end_utc``, by rig,
+        ROI and minute."""
+        with self._lock:
+            rows = self.db.execute(
+                f"SELECT {', '.join(READING_COLUMNS)} FROM readings WHERE minute_utc >= ? "
+                "AND minute_utc < ? ORDER BY rig, roi, minute_utc",
+                (start_utc, end_utc),
+            ).fetchall()
+        return [dict(zip(READING_COLUMNS, row, strict=True)) for row in rows]
+
+    def forget_readings(self, before_utc: str) -> int:
+        """Delete the readings of the minutes before ``before_utc``; how many."""
+        with self._lock:
+            cur = self.db.execute("DELETE FROM readings WHERE minute_utc < ?", (before_utc,))
+            return cur.rowcount
 
     def count(self) -> int:
         with self._lock:

@@ -6,7 +6,8 @@ value); the body the event's line, where and when, its fields, and links to it a
 evidence when ``http.public_url`` is set; the event's overlay (``snapshot.png``, drawn just
 after the event) attached when it has one. A digest lists the events held back by the hourly
 limit, one line each. ``X-Thermodepth-Event-Id`` carries the event's id (at least once: a
-repeat has the same).
+repeat has the same). A scheduled inspection report (:mod:`..reports`) is a message of its
+own with the file attached (``X-Thermodepth-Report``: its name).
 
 With ``starttls`` the connection is upgraded before anything else is said (the server's
 certificate verified, against ``ca_file`` when given), and only then does it log in. A 4xx
@@ -19,9 +20,11 @@ from __future__ import annotations
 import smtplib
 from email.message import EmailMessage
 from email.utils import formatdate, make_msgid
+from pathlib import Path
 from typing import Any
 
 from ...alarms import event_line
+from ...app.report import Period
 from ..config import EmailConfig, first_line
 from .base import OutputContext
 from .notify import DeliveryError, Notifier, label
@@ -86,8 +89,36 @@ class EmailOutput(Notifier):
                 msg.add_attachment(data, maintype="image", subtype="png", filename=name)
         return msg
 
+    def report_message(self, path: Path, period: Period, summary: str) -> EmailMessage:
+        """A scheduled report's message: the file attached."""
+        msg = EmailMessage()
+        msg["From"], msg["To"] = self.config.sender, ", ".join(self.config.to)
+        msg["Date"], msg["Message-ID"] = formatdate(localtime=False), make_msgid("thermodepth")
+        msg["Subject"] = f"[thermodepth] inspection report {period.label()}"
+        msg["X-Thermodepth-Report"] = path.name
+        held = f" ({summary})" if summary else ""
+        lines = [f"The monitor's inspection report of {period.label()}{held} is attached: "
+                 f"{path.name}."]  # fmt: skip
+        link = self.report_link(path)
+        if link is not None:
+            lines += ["", f"It is also at {link}"]
+        msg.set_content("\n".join(lines) + "\n")
+        kind = ("application", "pdf") if path.suffix == ".pdf" else ("text", "html")
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise DeliveryError(f"{path}: cannot read it ({exc.strerror or exc})", True) from None
+        msg.add_attachment(data, maintype=kind[0], subtype=kind[1], filename=path.name)
+        return msg
+
+    def send_report(self, path: Path, period: Period, summary: str) -> None:
+        self.deliver(self.report_message(path, period, summary), path.name)
+
     def send(self, events: list[dict[str, Any]], digest: bool) -> None:
-        msg = self.message(events, digest)
+        self.deliver(self.message(events, digest), ", ".join(map(label, events)))
+
+    def deliver(self, msg: EmailMessage, what: str) -> None:
+        """Send a message (``what``: it in a few words, for the log)."""
         # before MAIL FROM a refusal is the target's (a login, TLS), not the message's
         sending = False
         try:
@@ -114,6 +145,4 @@ class EmailOutput(Notifier):
         except (smtplib.SMTPException, OSError) as exc:
             raise DeliveryError(f"SMTP {self.host}:{self.port}: {exc}", True) from None
         if refused:
-            self.log.warning(
-                "%s: %s not delivered to %s", self.name, ", ".join(map(label, events)), refused
-            )
+            self.log.warning("%s: %s not delivered to %s", self.name, what, refused)

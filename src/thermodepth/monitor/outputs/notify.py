@@ -30,6 +30,7 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
+from ...app.report import Period
 from ...io.measurements import jsonable
 from ..config import EmailConfig, NotifyTarget, WebhookConfig
 from ..logs import logger
@@ -191,6 +192,15 @@ class Notifier(Output):
         """Send one message: one event, or a digest of several held back (DeliveryError when
         it cannot)."""
         raise NotImplementedError
+
+    def send_report(self, path: Path, period: Period, summary: str) -> None:
+        """Send a scheduled inspection report (:mod:`..reports`; ``summary``: what it holds
+        in a few words, or empty); DeliveryError when it cannot."""
+        raise NotImplementedError
+
+    def report_link(self, path: Path) -> str | None:
+        """The report's address on the monitor's web server (``http.public_url`` set)."""
+        return None if self.public_url is None else f"{self.public_url}/api/reports/{path.name}"
 
     # -- what a message tells -------------------------------------------------------------------
 

@@ -13,6 +13,11 @@ set); a digest is ``{"digest": true, "count": N, "events": [...]}``. Headers:
 
 A 2xx is delivered; a 5xx, 429, 408, a refused or timed-out connection are retried; any other
 answer (a 4xx, a redirect: a POST is not followed) is refused for good.
+
+A scheduled inspection report (:mod:`..reports`) is a POST of its own, signed the same way:
+``{"report": {"file", "path", "from_utc", "to_utc", "period", "summary", "link"}}`` (the
+file stays on the monitor's disk; ``link`` to it when ``http.public_url`` is set), its id
+header ``report-FILE``.
 """
 
 from __future__ import annotations
@@ -22,9 +27,11 @@ import hmac
 import json
 import urllib.error
 import urllib.request
+from pathlib import Path
 from typing import Any
 
 from ... import __version__
+from ...app.report import Period
 from ..config import WebhookConfig, first_line
 from .base import OutputContext
 from .notify import DeliveryError, Notifier
@@ -73,8 +80,30 @@ class WebhookOutput(Notifier):
             event_id = str(events[0].get("id") or unstored_id(events[0]))
         return json.dumps(data).encode("utf-8"), event_id
 
+    def report_body(self, path: Path, period: Period, summary: str) -> bytes:
+        """A scheduled report's body: ``{"report": {...}}`` naming the file (where it is on
+        the monitor's disk; its ``link`` when ``http.public_url`` is set)."""
+        told: dict[str, Any] = {
+            "file": path.name,
+            "path": str(path),
+            "from_utc": period.start_utc,
+            "to_utc": period.end_utc,
+            "period": period.label(),
+            "summary": summary or None,
+        }
+        link = self.report_link(path)
+        if link is not None:
+            told["link"] = link
+        return json.dumps({"report": told}).encode("utf-8")
+
+    def send_report(self, path: Path, period: Period, summary: str) -> None:
+        self.post(self.report_body(path, period, summary), f"report-{path.name}")
+
     def send(self, events: list[dict[str, Any]], digest: bool) -> None:
-        body, event_id = self.body(events, digest)
+        self.post(*self.body(events, digest))
+
+    def post(self, body: bytes, event_id: str) -> None:
+        """POST a signed body (DeliveryError when it cannot be delivered)."""
         request = urllib.request.Request(
             self.config.url,
             data=body,
