@@ -655,20 +655,27 @@ class Pipeline:
         out = np.where(bad, np.float32(np.nan), temp.astype(np.float32, copy=False))
         return out.astype(np.float32, copy=False), flags.astype(np.uint8, copy=False)
 
+    def distances(self, range_m: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Each thermal pixel's distance (m) from its nearest surface's range (NaN where no
+        depth pixel reaches it): those without one at the fallback distance (the settings',
+        else the median of the known ranges, else 1 m); and where they are (mask)."""
+        missing = np.isnan(range_m)
+        if not missing.any():
+            return range_m, missing
+        # the median of every 4th pixel each way: robust, and 16x cheaper than all
+        sample = range_m[::4, ::4]
+        known = sample[np.isfinite(sample)]  # np.nanmedian's value, at a third of its cost
+        s = self.settings
+        fallback = s.fallback_distance_m or (float(np.median(known)) if known.size else 1.0)
+        return np.where(missing, np.float32(fallback), range_m), missing
+
     def process(self, pair: FramePair) -> FusedFrame:
         """Fuse one frame pair (steps in the module docstring)."""
         self.check_sizes(pair)
         radiometry = self.radiometry_of(pair)
         s = self.settings
         near = self.registration.depth_to_thermal(pair.depth)
-        distance = near.range_m
-        missing = np.isnan(distance)
-        if missing.any():
-            # the median of every 4th pixel each way: robust, and 16x cheaper than all
-            sample = distance[::4, ::4]
-            known = sample[np.isfinite(sample)]  # np.nanmedian's value, at a third of its cost
-            fallback = s.fallback_distance_m or (float(np.median(known)) if known.size else 1.0)
-            distance = np.where(missing, np.float32(fallback), distance)
+        distance, missing = self.distances(near.range_m)
         vox_c = pair.telemetry.fpa_temp_c
         if pair.telemetry.in_ffc or self.corrupt(pair, radiometry):
             # the shutter's image, or values mostly of no temperature: the few that look
