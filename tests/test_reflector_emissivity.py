@@ -207,3 +207,25 @@ def test_writing_an_emissivity_keeps_the_rest_of_the_file(tmp_path: Path) -> Non
     assert "# flow style" in path.read_text(encoding="utf-8")
     with pytest.raises(FieldError, match="no ROI named 'nope'"):
         write_roi_emissivity(path, "nope", 0.5)
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--frames", "0"], "--frames: must be at least 1, got 0"),
+        (["--reference-emissivity", "1.5"], "--reference-emissivity: 1.5 is outside (0, 1]"),
+        (["--tolerance", "0.99"], "--tolerance: 0.99: expected 0 <= tolerance < the emissivity"),
+        (["--target", "nope"], "--target: 'nope' is no ROI of"),
+    ],
+)
+def test_the_command_says_what_is_wrong_in_one_line(
+    tmp_path: Path, extra: list[str], message: str
+) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_text("rois: [{name: tape, rect: [0, 0, 9, 9]}, {name: bar, rect: [9, 0, 19, 9]}]\n")
+    args = ["emissivity", "sim", "--reference", "tape", "--target", "bar",
+            "--reference-emissivity", "0.95", "--settings", str(path), *extra]  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert result.output.strip().startswith(f"error: {message}"), result.output
+    assert len(result.output.strip().splitlines()) == 1

@@ -73,6 +73,14 @@ class EmissivityEstimate:
         )
 
 
+def check_reference(emissivity: float, tolerance: float) -> None:
+    """FieldError unless 0 < ``emissivity`` <= 1 and 0 <= ``tolerance`` < ``emissivity``."""
+    if not 0 < emissivity <= 1:
+        raise FieldError("reference_emissivity", f"{emissivity:g} is outside (0, 1]")
+    if not 0 <= tolerance < emissivity:
+        raise FieldError("tolerance", f"{tolerance:g}: expected 0 <= tolerance < the emissivity")
+
+
 def _names(settings: Settings, reference: str, target: str) -> dict[str, RoiSettings]:
     by_name = {r.name: r for r in settings.rois}
     for option, name in (("reference", reference), ("target", target)):
@@ -187,10 +195,7 @@ def estimate_emissivity(
     """The target ROI's emissivity from a reference ROI of ``reference_emissivity`` (its
     stated ``tolerance``, +-) over the frames of ``pairs`` (module docstring; frames taken
     while the shutter is closed are skipped). InputError when no frame gives a value."""
-    if not 0 < reference_emissivity <= 1:
-        raise FieldError("reference_emissivity", f"{reference_emissivity:g} is outside (0, 1]")
-    if not 0 <= tolerance < reference_emissivity:
-        raise FieldError("tolerance", f"{tolerance:g}: expected 0 <= tolerance < the emissivity")
+    check_reference(reference_emissivity, tolerance)
     by_name = _names(settings, reference, target)
     low, high = reference_emissivity - tolerance, min(1.0, reference_emissivity + tolerance)
     plain, (at, at_low, at_high) = solver_settings(

@@ -11,7 +11,7 @@ from pathlib import Path
 import yaml
 
 from ..calibration import Calibration
-from ..emissivity import EmissivityEstimate, estimate_emissivity
+from ..emissivity import EmissivityEstimate, check_reference, estimate_emissivity
 from ..errors import FieldError, InputError, check_count, read_text
 from ..pipeline import Settings
 from ..sources.pairing import DEFAULT_MAX_SKEW_S
@@ -57,8 +57,13 @@ def measure_emissivity(options: EmissivityOptions, warn: Warn | None = None) -> 
     (:func:`~thermodepth.emissivity.estimate_emissivity`) and, with ``write``, set it in the
     settings file (:func:`write_roi_emissivity`)."""
     check_count("frames", options.frames)
+    check_reference(options.reference_emissivity, options.tolerance)
     check_source(options)
     settings = Settings.load(options.settings)
+    by_name = {r.name for r in settings.rois}
+    for option, name in (("reference", options.reference), ("target", options.target)):
+        if name not in by_name:
+            raise FieldError(option, f"{name!r} is no ROI of {settings.where}")
     cal = Calibration.load(settings.calibration) if settings.calibration else None
     choice = _Choice(options, spec_of(options.source))
     with open_choice(choice, cal, warn, frames=options.frames) as src:
