@@ -34,7 +34,10 @@ def patch(name: str, x_m: float, temp_c: float, emissivity: float, half_m: float
     return Rect(np.array([x_m, 0, 0]), EX, EY, half_m, half_m, material, name=name)
 
 
-def bench(distance_m: float, busbar_emissivity: float) -> tuple[Rig, dict[str, tuple[int, ...]]]:
+Box = tuple[int, int, int, int]
+
+
+def bench(distance_m: float, busbar_emissivity: float) -> tuple[Rig, dict[str, Box]]:
     """Tape (0.95) and a busbar (``busbar_emissivity``), both at 60 C, and a crumpled-foil
     card (0.04) at the room's 25 C, side by side on a plane 30 cm before a wall; the rig
     ``distance_m`` away; and each patch's inner rectangle on the depth image."""
@@ -53,12 +56,13 @@ def bench(distance_m: float, busbar_emissivity: float) -> tuple[Rig, dict[str, t
         0.5,
     )
     rig = Rig(scene, camera_pose(distance_m), start_s=1.0, fpa=constant_fpa(35 + ZERO_C_IN_K))
-    rects = {}
+    rects: dict[str, Box] = {}
     for name, x in xs.items():
         inner = 0.6 * half  # clear of the optics' blur at the patch's edges
         corners = np.array([[x - inner, -inner, 0.0], [x + inner, inner, 0.0]])
         uv = rig.calibration.depth.project(rig.depth_from_world.apply(corners))
-        rects[name] = tuple(int(v) for v in np.rint(uv).ravel())
+        u0, v0, u1, v1 = (int(v) for v in np.rint(uv).ravel())
+        rects[name] = (u0, v0, u1, v1)
     return rig, rects
 
 
