@@ -122,7 +122,7 @@ def test_rules_from_the_settings_one_line_each(tmp_path: Path) -> None:
     bad = {
         "{name: a, above_c: 50, below_c: 10}": "give exactly one of above_c, below_c",
         "{name: a}": "give exactly one of above_c, below_c, rise_c_per_min, delta_c, "
-        "area_cm2_above (got none)",
+        "area_cm2_above, priority_at_most (got none)",
         "{name: a, delta_c: 3}": "delta_c and relative_to go together",
         "{name: a, above_c: 50, for_s: 2, for_frames: 3}": "give for_s (seconds) or for_frames",
         "{name: a, above_c: 50, clear_below_c: 55}": "clear_below_c must be at or below 50",

@@ -31,7 +31,7 @@ WATCHED = """\
 hotspots:
   threshold_c: 50
 rois:
-  - {name: plate, rect: [560, 280, 720, 440]}
+  - {name: plate, rect: [560, 280, 720, 440], severity: {criteria: neta-ambient}}
 """
 SLOW_ALARM = (
     WATCHED
@@ -198,6 +198,10 @@ def test_acknowledge_on_the_rig_page_reaches_the_event_store_and_mqtt(plant: Any
     # the ROI table and its trend
     row = wait_for(lambda: cells(driver, "#rois tr[data-roi=plate]"))[0]
     assert row[0] == "plate" and 60 < float(row[1]) < 75
+    # its severity class: the chip's max (some 67 C) is over 40 C above the 25 C air
+    words = row[4].lower()  # (the badge's letters are shown in capitals)
+    assert words.startswith("p1 major discrepancy δt 4") and words.endswith("°c vs ambient")
+    assert texts(driver, "#rois tr[data-roi=plate] [data-priority='1'] .badge.p1")
     assert wait_for(lambda: picture_sum(driver, "#thermal"))[0] > 0
 
 

@@ -411,7 +411,8 @@ def test_a_running_monitor_keeps_its_readings_a_row_a_minute(tmp_path: Path) -> 
     store.close()
     assert {r["roi"] for r in rows} <= {"*", "left"} and rows
     hottest = [r for r in rows if r["roi"] == "*"]
-    assert 20 <= sum(r["frames"] for r in hottest) <= frames
+    # every frame with a hottest reading counted once (a shutter frame has none)
+    assert 0 < sum(r["frames"] for r in hottest) <= frames
     # the simulated chip (70 C at 1 m) reads 67.42-67.59 C (monitor_helpers.FLAPPING)
     assert all(67.3 <= r["min_c"] <= r["mean_c"] <= r["max_c"] <= 67.7 for r in hottest)
     assert all(r["rig"] == "sim1" and r["minute_utc"].endswith(":00+00:00") for r in rows)

@@ -9,6 +9,8 @@ condition on it:
   way a busbar is compared with its neighbour under the same load;
 - ``area_cm2_above``: an isotherm's area on the surfaces (:mod:`thermodepth.isotherms`) above
   this many cm^2 (its events carry ``value_cm2``, and ``value_c`` None).
+- ``priority_at_most``: the ROI's severity class (:mod:`thermodepth.severity`) as urgent as
+  this priority or more (its priority number at most this); no class is not.
 
 The condition must hold ``for_s`` seconds (or, as before, ``for_frames`` frames in a row) to
 raise the rule (an on-delay: frame rates differ per camera). It clears once the value is back
@@ -39,7 +41,7 @@ from .measure import Hotspot, RoiStats
 LEVELS = ("warning", "alarm")
 RAISED = ("alarm", "escalated")
 """The events that raise a rule (a raise, and a raise that escalates)."""
-KINDS = ("above_c", "below_c", "rise_c_per_min", "delta_c", "area_cm2_above")
+KINDS = ("above_c", "below_c", "rise_c_per_min", "delta_c", "area_cm2_above", "priority_at_most")
 STATS = ("max", "mean", "min")
 
 
@@ -67,13 +69,14 @@ class AlarmRule:
     clear_above_c: float | None = None
     clear_for_s: float = 0.0
     latch: bool = False
+    priority_at_most: int | None = None
 
     def __post_init__(self) -> None:
         given = [k for k in KINDS if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(
                 f"alarm {self.name!r}: give exactly one of above_c, below_c, rise_c_per_min, "
-                f"delta_c, area_cm2_above (got {', '.join(given) or 'none'})"
+                f"delta_c, area_cm2_above, priority_at_most (got {', '.join(given) or 'none'})"
             )
         if self.for_frames < 1:
             raise ValueError(f"alarm {self.name!r}: for_frames must be >= 1, got {self.for_frames}")
@@ -81,6 +84,8 @@ class AlarmRule:
             raise ValueError(f"alarm {self.name!r}: level must be warning or alarm")
         if (self.delta_c is None) != (self.relative_to is None):
             raise ValueError(f"alarm {self.name!r}: delta_c and relative_to go together")
+        if self.kind == "priority_at_most" and self.what == "hotspot":
+            raise ValueError(f"alarm {self.name!r}: priority_at_most watches an ROI's severity")
         if self.clear_below_c is not None and self.kind not in ("above_c", "delta_c"):
             raise ValueError(f"alarm {self.name!r}: clear_below_c is for above_c or delta_c")
         if self.clear_above_c is not None and self.kind != "below_c":
@@ -115,6 +120,7 @@ class AlarmRule:
             "rise_c_per_min": f"rising faster than {self.limit:g} C/min",
             "delta_c": f"more than {self.limit:g} C above {self.relative_to}",
             "area_cm2_above": f"area above {self.limit:g} cm2",
+            "priority_at_most": f"severity priority {self.limit:g} or more urgent",
         }[self.kind]
         if self.for_s is not None:
             return f"{words} for {self.for_s:g} s"
@@ -125,6 +131,8 @@ class AlarmRule:
         delta rule)."""
         if not np.isfinite(value):
             return False
+        if self.kind == "priority_at_most":
+            return value <= self.limit
         return value < self.limit if self.kind == "below_c" else value > self.limit
 
     def gone(self, value: float) -> bool:
@@ -134,6 +142,8 @@ class AlarmRule:
             return True
         if self.kind == "below_c":
             return value > (self.limit if self.clear_above_c is None else self.clear_above_c)
+        if self.kind == "priority_at_most":
+            return value > self.limit
         clear = self.clear_below_c if self.clear_below_c is not None else self.limit
         return value <= clear
 
@@ -196,6 +206,9 @@ class AlarmTracker:
             hot = hotspots[0] if hotspots else None
             return (hot.max_c if hot else float("nan")), hot
         roi = by_name.get(rule.what)
+        if rule.kind == "priority_at_most":  # the class's priority; NaN: none
+            priority = (roi.severity or {}).get("priority") if roi else None
+            return (float("nan") if priority is None else float(priority)), roi
         value = getattr(roi, f"{rule.watched}_c") if roi and roi.n else float("nan")
         if rule.kind == "delta_c":
             ref = by_name.get(rule.relative_to or "")
@@ -328,6 +341,11 @@ def _event(
     }
     if rule.kind == "area_cm2_above":  # an area, not a temperature
         event["value_cm2"], event["value_c"] = event["value_c"], None
+    elif rule.kind == "priority_at_most":  # the value is a priority; the class says the rest
+        event["value_c"] = None
+        event["priority"] = int(value) if np.isfinite(value) else None
+        if isinstance(subject, RoiStats) and subject.severity:
+            event["severity"] = subject.severity
     if rule.for_s is not None:
         event["for_s"] = rule.for_s
     if isinstance(subject, Hotspot):
@@ -348,6 +366,8 @@ def event_line(event: dict[str, Any]) -> str:
     value = "" if event.get("value_c") is None else f": {event['value_c']} C"
     if event.get("value_cm2") is not None:
         value = f": {event['value_cm2']} cm2"
+    elif event.get("priority") is not None:
+        value = f": priority {event['priority']}"
     who = f" by {event['by']}" if event["event"] == "acknowledged" else ""
     frame = "" if event.get("frame") is None else f", frame {event['frame']}"
     return (

@@ -113,6 +113,7 @@ class RoiStats:
     min_c: float
     sd_c: float
     flags: int = 0
+    severity: dict[str, Any] | None = None  # its class (thermodepth.severity), if it has one
 
     @classmethod
     def of(cls, name: str, moments: Moments) -> RoiStats:

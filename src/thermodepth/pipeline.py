@@ -49,6 +49,7 @@ from .errors import FieldError, InputError, repeated
 from .frames import FramePair, Telemetry, thermal_output
 from .isotherms import IsothermArea, IsothermRoi, isotherm_area
 from .lines import LineProfile, LineRoi, line_profile
+from .materials import MATERIALS
 from .measure import (
     DepthRangeRoi,
     Hotspot,
@@ -78,8 +79,12 @@ from .registration import (
     ThermalOnDepth,
 )
 from .schema import PlanckSchema, StrictSchema, load_validated
+from .severity import SeverityJudge, SeverityRow, SeveritySettings, all_tables, settings_problem
 
 FloatArray = NDArray[np.float32]
+GroupKey = tuple[float | None, float | None, str | None]
+"""An ROI group's conditions: emissivity, reflected temperature (C), the reflector ROI that
+sets it each frame (None where neither differs from the settings')."""
 
 # Pipeline.warm_up's made-up frames: a wall at 30 C, 1 m away and nearer than any view table
 # reaches (z < 0.1 m: the registration's other path); TLinear at 0.01 K a value
@@ -182,6 +187,36 @@ class RoiSettings(StrictSchema):
     within: str | None = None
     emissivity: Annotated[float | None, checked_condition("emissivity")] = None
     reflected_temp_c: Annotated[float | None, checked_condition("reflected_temp_c")] = None
+    # -- thermography (docs/thermography.md): severity class, material, reflector ----------
+    severity: SeveritySettings | None = None
+    material: Annotated[str, _one_of(MATERIALS)] | None = None
+    reflector: bool = False
+    reflects_for: list[str] = Field(default_factory=list)
+
+    @property
+    def own_emissivity(self) -> float | None:
+        """The emissivity the ROI is read with where it differs from the settings': 1 for a
+        reflector, else its ``emissivity``, else its ``material``'s, else None."""
+        if self.reflector:
+            return 1.0
+        if self.emissivity is not None:
+            return self.emissivity
+        return None if self.material is None else MATERIALS[self.material].emissivity
+
+    @model_validator(mode="after")
+    def _reflector(self) -> RoiSettings:
+        if self.reflector:
+            if self.emissivity not in (None, 1.0) or self.material is not None:
+                raise ValueError(
+                    "a reflector is read at emissivity 1: give no emissivity or material"
+                )
+            if self.reflected_temp_c is not None or self.severity is not None:
+                raise ValueError("a reflector has no reflected_temp_c or severity of its own")
+        elif self.reflects_for:
+            raise ValueError("reflects_for is for a reflector (reflector: true)")
+        return self
+
+    # -- end thermography --------------------------------------------------------------------
 
     @property
     def shape(self) -> str:
@@ -254,6 +289,7 @@ class AlarmSettings(StrictSchema):
     delta_c: float | None = Field(default=None, gt=0)
     relative_to: str | None = None
     area_cm2_above: float | None = Field(default=None, gt=0)
+    priority_at_most: int | None = Field(default=None, ge=1)  # an ROI's severity class
     stat: Literal["max", "mean", "min"] | None = None
     for_frames: int = Field(default=1, ge=1)
     for_s: float | None = Field(default=None, ge=0)
@@ -323,6 +359,7 @@ class Settings(StrictSchema):
     hotspots: HotspotSettings = HotspotSettings()
     rois: list[RoiSettings] = Field(default_factory=list)
     alarms: list[AlarmSettings] = Field(default_factory=list)
+    severity_criteria: dict[str, list[SeverityRow]] = Field(default_factory=dict)
     fallback_distance_m: float | None = Field(default=None, gt=0, le=MAX_DISTANCE_M)
     viewer: ViewerSettings = ViewerSettings()
     mqtt: MqttSettings = MqttSettings()
@@ -392,7 +429,46 @@ class Settings(StrictSchema):
                 )
             if a.area_cm2_above is not None and a.stat is not None:
                 raise ValueError(f"alarm {a.name!r}: stat is not for an area rule")
+        self._thermography_checks()
         return self
+
+    # -- thermography (docs/thermography.md): severity tables, reflectors --------------------
+
+    def _thermography_checks(self) -> None:
+        by_name = {r.name: r for r in self.rois}
+        severities = {r.name: r.severity for r in self.rois if r.severity is not None}
+        why = settings_problem(self.severity_criteria, severities, list(by_name))
+        if why:
+            raise ValueError(why)
+        for a in self.alarms:
+            if a.priority_at_most is not None and a.what not in severities:
+                raise ValueError(
+                    f"alarm {a.name!r}: priority_at_most watches an ROI with a severity "
+                    f"({', '.join(sorted(severities)) or 'none has one'})"
+                )
+        reflected: dict[str, str] = {}
+        for r in self.rois:
+            for name in r.reflects_for:
+                target = by_name.get(name)
+                if target is None or target.reflector:
+                    raise ValueError(
+                        f"roi {r.name!r}: reflects_for: {name!r} is not an ROI that is no reflector"
+                    )
+                if target.reflected_temp_c is not None:
+                    raise ValueError(
+                        f"roi {name!r}: reflected_temp_c and reflector {r.name!r} both set it"
+                    )
+                if name in reflected:
+                    raise ValueError(
+                        f"roi {name!r}: named by two reflectors ({reflected[name]!r}, {r.name!r})"
+                    )
+                reflected[name] = r.name
+
+    def reflector_of(self, roi: str) -> str | None:
+        """The reflector ROI whose reading is ``roi``'s reflected temperature, or None."""
+        return next((r.name for r in self.rois if roi in r.reflects_for), None)
+
+    # -- end thermography --------------------------------------------------------------------
 
 
 # ---------------------------------------------------------------------------------------------
@@ -561,17 +637,27 @@ class Pipeline:
             for i in (*area, *(i for i, r in enumerate(self.rois) if isinstance(r, LineRoi)))
         }
         # ROIs under the settings' conditions are summed while the frame's temperature is
-        # sampled; each other set of conditions (an ROI's emissivity, reflected temperature)
-        # has its own temperatures and its own sampling pass
-        groups: dict[tuple[float | None, float | None], list[int]] = {}
+        # sampled; each other set of conditions (an ROI's emissivity, reflected temperature,
+        # the reflector whose reading is its reflected temperature) has its own temperatures
+        # and its own sampling pass; the groups a reflector's reading sets come last, after
+        # every reflector has been read
+        groups: dict[GroupKey, list[int]] = {}
         for i in area:
-            key = (s.rois[i].emissivity, s.rois[i].reflected_temp_c)
+            roi_settings = s.rois[i]
+            reflector = s.reflector_of(roi_settings.name)
+            key = (roi_settings.own_emissivity, roi_settings.reflected_temp_c, reflector)
             groups.setdefault(key, []).append(i)
         h_d = calibration.depth.height
         self._groups = [
             (key, members, Regions([regions[i] for i in members], h_d))
-            for key, members in groups.items()
+            for key, members in sorted(groups.items(), key=lambda kv: kv[0][2] is not None)
         ]
+        self._index = {roi.name: i for i, roi in enumerate(self.rois)}
+        self.severity = SeverityJudge(
+            all_tables(s.severity_criteria),
+            {r.name: r.severity for r in s.rois if r.severity is not None},
+            float(r.ambient_temp_c),
+        )
         for i, region in regions.items():
             roi = self.rois[i]
             if not isinstance(roi, DepthRangeRoi) and region.rows.start == region.rows.stop:
@@ -642,20 +728,27 @@ class Pipeline:
         out = np.where(bad, np.float32(np.nan), temp.astype(np.float32, copy=False))
         return out.astype(np.float32, copy=False), flags.astype(np.uint8, copy=False)
 
+    def distances(self, range_m: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Each thermal pixel's distance (m) from its nearest surface's range (NaN where no
+        depth pixel reaches it): those without one at the fallback distance (the settings',
+        else the median of the known ranges, else 1 m); and where they are (mask)."""
+        missing = np.isnan(range_m)
+        if not missing.any():
+            return range_m, missing
+        # the median of every 4th pixel each way: robust, and 16x cheaper than all
+        sample = range_m[::4, ::4]
+        known = sample[np.isfinite(sample)]  # np.nanmedian's value, at a third of its cost
+        s = self.settings
+        fallback = s.fallback_distance_m or (float(np.median(known)) if known.size else 1.0)
+        return np.where(missing, np.float32(fallback), range_m), missing
+
     def process(self, pair: FramePair) -> FusedFrame:
         """Fuse one frame pair (steps in the module docstring)."""
         self.check_sizes(pair)
         radiometry = self.radiometry_of(pair)
         s = self.settings
         near = self.registration.depth_to_thermal(pair.depth)
-        distance = near.range_m
-        missing = np.isnan(distance)
-        if missing.any():
-            # the median of every 4th pixel each way: robust, and 16x cheaper than all
-            sample = distance[::4, ::4]
-            known = sample[np.isfinite(sample)]  # np.nanmedian's value, at a third of its cost
-            fallback = s.fallback_distance_m or (float(np.median(known)) if known.size else 1.0)
-            distance = np.where(missing, np.float32(fallback), distance)
+        distance, missing = self.distances(near.range_m)
         vox_c = pair.telemetry.fpa_temp_c
         if pair.telemetry.in_ffc or self.corrupt(pair, radiometry):
             # the shutter's image, or values mostly of no temperature: the few that look
@@ -691,8 +784,12 @@ class Pipeline:
         if frame.in_ffc:  # measurements never use the shutter's image
             return frame
         moments: list[Moments | None] = [None] * len(self.rois)
-        for (emissivity, reflected_c), members, group in self._groups:
-            if emissivity is None and reflected_c is None:  # summed while the frame is sampled
+        for (emissivity, reflected_c, reflector), members, group in self._groups:
+            if reflector is not None:  # the reflector's apparent temperature, read before
+                read = moments[self._index[reflector]]
+                reflected_c = read.mean if read is not None and read.n else None
+            if emissivity is None and reflected_c is None and reflector is None:
+                # summed while the frame is sampled
                 sums = group.row_sums(flags)
                 frame.on_depth = sample_depth(regions=sums)
             else:  # under their own conditions: their own temperatures, sampled for them
@@ -799,6 +896,12 @@ class Pipeline:
             measured[roi.name] if roi.name in measured else RoiStats.of(roi.name, next(summed))
             for roi in self.rois
         ]
+        classes = self.severity.judge({r.name: r for r in frame.rois})
+        if classes:  # each ROI's severity class goes with its reading
+            frame.rois = [
+                r if r.name not in classes else replace(r, severity=classes[r.name].as_dict())
+                for r in frame.rois
+            ]
         frame.events = self.alarms.update(
             frame.thermal_time_s,
             frame.index,

@@ -20,6 +20,8 @@ module                 use cases
 :mod:`.simulate`       ``sweep``, ``frames``, ``targets``, ``board_session``, ``protocol`` on
                        the simulated rig
 :mod:`.temperature`    ``counts_to_celsius``
+:mod:`.emissivity`     ``measure_emissivity`` (a target ROI's emissivity against a reference
+                       ROI), ``write_roi_emissivity`` (into the settings YAML)
 :mod:`.devices`        ``list_devices``, ``describe_devices``
 :mod:`.demo`           ``run_demo``: the whole story on the simulated rig
 :mod:`.monitor`        ``run_monitor`` (the always-on monitor of a config, until stopped),

@@ -8,7 +8,18 @@ the app, the error handling and the shared options.
 """
 
 # in this order: the commands are listed in `thermodepth --help` as they are registered
-from . import batch, calibrate, compensation, measure, monitor, report, ros, simulate, thermal_map
+from . import (
+    batch,
+    calibrate,
+    compensation,
+    emissivity,
+    measure,
+    monitor,
+    report,
+    ros,
+    simulate,
+    thermal_map,
+)
 from .base import app
 from .measure import print_frame
 
@@ -17,6 +28,7 @@ __all__ = [
     "batch",
     "calibrate",
     "compensation",
+    "emissivity",
     "main",
     "measure",
     "monitor",

@@ -309,7 +309,8 @@ class RigSink(BaseSink):
                     "resolvable": hot.resolvable,
                 }
             )
-            s.rois = {r.name: {"max_c": r.max_c, "mean_c": r.mean_c, "min_c": r.min_c, "n": r.n}
+            s.rois = {r.name: {"max_c": r.max_c, "mean_c": r.mean_c, "min_c": r.min_c, "n": r.n,
+                               "severity": r.severity}  # its class (thermodepth.severity)
                       for r in fused.rois}  # fmt: skip
         pipeline = self.context.pipeline if self.context is not None else None
         self.live.fused(fused, pipeline.alarms if pipeline is not None else None)

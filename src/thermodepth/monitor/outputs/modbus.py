@@ -16,6 +16,10 @@ offset         table         type       what                                    
 4              input         float32    the same, C                                 1
 6              input         uint32     fused frames since the server started       1
 16 + 10·i      input         int16      ROI i's max, mean, min (3 registers), C     0.1
+19 + 10·i      input         uint16     ROI i's severity class: its priority (1     1
+                                        most urgent); 0 below its table's first
+                                        row; 65535 no class (no severity, no
+                                        reading)
 20 + 10·i      input         float32    ROI i's max, mean, min (6 registers), C     1
 0              discrete      bool       a sensor fault is raised                    1
 1 + j          discrete      bool       rule j is raised                            1
@@ -72,6 +76,8 @@ RULE_BASE = 1
 MAX_RULES = 48
 STATS = ("max", "mean", "min")
 NO_INT16 = -32768
+NO_CLASS = 65535
+"""An ROI's priority register without a class (no severity set, no reading)."""
 HEALTH = {"ok": 0, "stale": 1, "fault": 2}
 STATUS_EVERY_S = 1.0
 BEAT_S = 0.5
@@ -118,6 +124,7 @@ def register_map(rigs: list[RigEntities], allow_ack: bool) -> list[Register]:
                 reg(at + k, "int16", 0.1, "C", f"roi.{roi}.{stat}_c_x10", "roi", i, k)
             for k, stat in enumerate(STATS):
                 reg(at + 4 + 2 * k, "float32", 1, "C", f"roi.{roi}.{stat}_c", "roi", i, k)
+            reg(at + 3, "uint16", 1, "", f"roi.{roi}.priority", "priority", i)
         regs.append(Register(bits, "discrete", "bool", 1, "", rig.name, SENSOR_FAULT, ("fault",)))
         for j, rule in enumerate(rig.rules):
             at = bits + RULE_BASE + j
@@ -183,6 +190,14 @@ def int16_raw(value_c: float, scale: float) -> int:
     return held & 0xFFFF
 
 
+def priority_raw(severity: dict[str, Any] | None) -> int:
+    """An ROI's severity class as its priority register: the priority, 0 below the table's
+    first row, :data:`NO_CLASS` without a class (no severity, no reading)."""
+    if not severity or severity.get("delta_t_c") is None:
+        return NO_CLASS
+    return 0 if severity.get("priority") is None else int(severity["priority"])
+
+
 def words(value: float | int, kind: str, big: bool) -> list[int]:
     """A 32-bit value (``float32`` or ``uint32``) as two registers, high word first when
     ``big``."""
@@ -199,6 +214,7 @@ class RigValues:
     frames: int = 0
     hottest_c: float = math.nan
     rois_c: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    priorities: dict[str, int] = field(default_factory=dict)
     health: int = HEALTH["stale"]
     raised: set[str] = field(default_factory=set)
     acked: set[str] = field(default_factory=set)
@@ -239,11 +255,12 @@ class ModbusOutput(Output):
         rois = {
             r.name: (r.max_c, r.mean_c, r.min_c) if r.n else (math.nan,) * 3 for r in fused.rois
         }
+        priorities = {r.name: priority_raw(r.severity) for r in fused.rois}
         with self._lock:
             v = self.values.get(rig)
             if v is not None:
                 v.frames += 1
-                v.hottest_c, v.rois_c = float(hot), rois
+                v.hottest_c, v.rois_c, v.priorities = float(hot), rois, priorities
 
     def announce(self, raised: dict[str, set[str]]) -> None:
         with self._lock:
@@ -308,6 +325,8 @@ class ModbusOutput(Output):
         if what == "roi":
             stats = v.rois_c.get(self._rois[rig][key[1]])
             return math.nan if stats is None else stats[key[2]]
+        if what == "priority":
+            return v.priorities.get(self._rois[rig][key[1]], NO_CLASS)
         if what == "fault":
             return SENSOR_FAULT in v.raised
         if what == "raised":

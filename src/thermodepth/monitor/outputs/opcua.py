@@ -16,6 +16,11 @@ node                                 what
 ``RIG.Hottest``                      Double, C: the hottest hotspot's max (NaN: none)
 ``RIG.Rois.ROI.Max`` / ``Mean`` /    Double, C: each ROI's statistics (NaN: no valid pixel)
 ``Min``
+``RIG.Rois.ROI.Priority``            Double: the ROI's severity class (thermodepth.severity):
+                                     its priority (1 most urgent), 0 below its table's first
+                                     row, NaN no class (no severity set, no reading)
+``RIG.Rois.ROI.Severity`` /          String: the class's words; Double, C: its delta-T (NaN:
+``DeltaT``                           none)
 ``RIG.Alarms.RULE.Raised``           Boolean; ``.Level`` (``warning``, ``alarm``) and
                                      ``.State`` (the rule's last event: ``alarm``,
                                      ``escalated``, ``acknowledged``, ``clear``)
@@ -263,6 +268,8 @@ class OpcUaOutput(Output):
                 folder = await rois.add_object(self._id(f"{rig.name}.Rois.{roi}"), roi)
                 for stat in STATS:
                     await variable(folder, f"{rig.name}.Rois.{roi}.{stat}", stat, math.nan, d)
+                for name, start, kind in SEVERITY_NODES:
+                    await variable(folder, f"{rig.name}.Rois.{roi}.{name}", name, start, kind(ua))
             alarms = await obj.add_object(self._id(f"{rig.name}.Alarms"), "Alarms")
             for rule in rig.rules:
                 node = await alarms.add_object(self._id(f"{rig.name}.Alarms.{rule}"), rule)
@@ -329,6 +336,7 @@ class OpcUaOutput(Output):
             for stat in STATS:
                 value = getattr(roi, f"{stat.lower()}_c") if roi.n else math.nan
                 values[f"{rig}.Rois.{roi.name}.{stat}"] = float(value)
+            values.update(severity_values(f"{rig}.Rois.{roi.name}", roi.severity))
         self._submit(self._write(values, fused.thermal_time_s))
 
     def tick(self, now_mono: float) -> None:
@@ -387,6 +395,26 @@ class OpcUaOutput(Output):
 
     def status(self) -> dict[str, Any]:
         return {"endpoint": self.config.endpoint, "serving": self.loop is not None}
+
+
+SEVERITY_NODES: tuple[tuple[str, Any, Any], ...] = (
+    ("Priority", math.nan, lambda ua: ua.VariantType.Double),
+    ("Severity", "", lambda ua: ua.VariantType.String),
+    ("DeltaT", math.nan, lambda ua: ua.VariantType.Double),
+)
+"""Each ROI's severity nodes: name, first value, type (module docstring)."""
+
+
+def severity_values(path: str, severity: dict[str, Any] | None) -> dict[str, Any]:
+    """The values of an ROI's severity nodes (``path``: the ROI's node path) for its class."""
+    if not severity or severity.get("delta_t_c") is None:
+        return {f"{path}.Priority": math.nan, f"{path}.Severity": "", f"{path}.DeltaT": math.nan}
+    priority = severity.get("priority")
+    return {
+        f"{path}.Priority": 0.0 if priority is None else float(priority),
+        f"{path}.Severity": str(severity.get("label", "")),
+        f"{path}.DeltaT": float(severity["delta_t_c"]),
+    }
 
 
 def describe(config: OpcUaConfig) -> str:

@@ -20,6 +20,13 @@ async function api(path, options = {}) {
 const json = async (path) => (await api(path)).json();
 
 function badge(text, kind = text) { return `<span class="badge ${esc(kind)}">${esc(text)}</span>`; }
+// an ROI's severity class (thermodepth.severity): its priority in colour, its words and delta-T
+function severity(c) {
+  if (!c) return "";
+  const kind = c.priority === null ? "clear" : `p${Math.min(c.priority, 4)}`;
+  const what = c.priority === null ? c.label : `P${c.priority} ${c.label}`;
+  return `<span data-priority="${esc(c.priority ?? "")}">${badge(what, kind)} ΔT ${num(c.delta_t_c)} °C vs ${esc(c.relative_to)}</span>`;
+}
 
 function legend(range) {
   if (!range) return "";
@@ -268,9 +275,9 @@ async function rigPage() {
     document.getElementById("alarms").innerHTML = alarmList(rig, true);
     const trend = await json(`/api/rigs/${q}/trend`);
     const rows = Object.entries(rig.rois).map(([roi, s]) => `<tr data-roi="${esc(roi)}"><td>${esc(roi)}</td>
-      <td>${num(s.max_c)}</td><td>${num(s.mean_c)}</td><td>${num(s.min_c)}</td>
+      <td>${num(s.max_c)}</td><td>${num(s.mean_c)}</td><td>${num(s.min_c)}</td><td>${severity(s.severity)}</td>
       <td>${spark(trend.map((t) => ({ time_s: t.time_s, value: t.rois[roi] ?? null })))}</td></tr>`).join("");
-    document.getElementById("rois").innerHTML = `<tr><th>ROI</th><th>max °C</th><th>mean °C</th><th>min °C</th><th>max, last hour</th></tr>${rows}`;
+    document.getElementById("rois").innerHTML = `<tr><th>ROI</th><th>max °C</th><th>mean °C</th><th>min °C</th><th>class</th><th>max, last hour</th></tr>${rows}`;
     const shapes = await api(`/api/rigs/${q}/lines`);
     document.getElementById("lines").innerHTML = shapes.ok ? linesTable(await shapes.json()) : "";
     const events = await json(`/api/events?rig=${q}&limit=20`);
