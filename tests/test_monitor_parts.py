@@ -659,3 +659,22 @@ def test_a_log_line_is_one_line_stamped_or_with_the_journals_priority(
         logging.getLogger("thermodepth.monitor").removeHandler(handler)
     assert out.getvalue().splitlines()[0].endswith("<3>clock failed")
     assert "ValueError: boom" in out.getvalue()  # its traceback on the lines after
+
+
+def test_a_server_s_port_is_checked_before_it_starts_ipv6_too() -> None:
+    # the outputs' servers (Modbus, OPC UA, RTSP) check their port first: one line when taken
+    from thermodepth.monitor.outputs.base import check_port
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(InputError, match=r"^modbus.listen: x: cannot listen \(.+\)$"):
+            check_port("127.0.0.1", port, "modbus.listen: x")
+    try:
+        with socket.socket(socket.AF_INET6) as probe:
+            probe.bind(("::1", 0))
+            free = probe.getsockname()[1]
+    except OSError:
+        pytest.skip("no IPv6 loopback here")
+    check_port("::1", free, "rtsp.listen: [::1]")  # an IPv6 host is bound as one

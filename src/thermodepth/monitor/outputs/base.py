@@ -13,10 +13,13 @@ again.
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+
+from ...errors import InputError
 
 if TYPE_CHECKING:
     from ...pipeline import FusedFrame, Settings
@@ -150,3 +153,16 @@ class Output:
 
     def stop(self, reason: str = "stopped") -> None:
         """Stop (its workers are stopped by the monitor first)."""
+
+
+def check_port(host: str, port: int, what: str) -> None:
+    """InputError ``WHAT: cannot listen (why)`` when ``(host, port)`` cannot be bound now, an
+    IPv6 host too: a port that is taken is one line before a server starts, not its
+    traceback later."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    try:
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind((host, port))
+    except OSError as exc:
+        raise InputError(f"{what}: cannot listen ({exc.strerror or exc})") from None

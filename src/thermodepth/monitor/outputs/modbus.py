@@ -46,7 +46,6 @@ import csv
 import io
 import logging
 import math
-import socket
 import struct
 import threading
 from collections.abc import Callable
@@ -60,7 +59,7 @@ from ..failsafe import SENSOR_FAULT
 from ..logs import logger
 from ..supervisor import AckRefusedError
 from ..workers import Worker
-from .base import Output, OutputContext, RigEntities, entities_of
+from .base import Output, OutputContext, RigEntities, check_port, entities_of
 
 if TYPE_CHECKING:
     from pymodbus.server import ModbusTcpServer
@@ -413,14 +412,7 @@ class ModbusOutput(Output):
     # -- the server's own worker ---------------------------------------------------------------
 
     def start(self, timeout_s: float = 30.0) -> None:
-        try:
-            with socket.socket() as s:  # a port that is taken is one line, not a traceback
-                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                s.bind(self.config.address())
-        except OSError as exc:
-            raise InputError(
-                f"modbus.listen: {self.config.listen}: cannot listen ({exc.strerror or exc})"
-            ) from None
+        check_port(*self.config.address(), f"modbus.listen: {self.config.listen}")
         self.worker.start()
         if not self._ready.wait(timeout_s) or self._error is not None:
             self.worker.stop()

@@ -58,7 +58,7 @@ from ..config import OpcUaConfig, read_users
 from ..failsafe import SENSOR_FAULT
 from ..logs import logger
 from ..workers import Worker
-from .base import Output, OutputContext, RigEntities
+from .base import Output, OutputContext, RigEntities, check_port
 
 if TYPE_CHECKING:
     from asyncua import Node, Server
@@ -112,15 +112,7 @@ class OpcUaOutput(Output):
     # -- the server's own worker ---------------------------------------------------------------
 
     def start(self, timeout_s: float = 30.0) -> None:
-        host, port = self.config.address()
-        try:
-            with socket.socket() as s:  # a port that is taken is one line, not a traceback
-                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                s.bind((host, port))
-        except OSError as exc:
-            raise InputError(
-                f"opcua.endpoint: {self.config.endpoint}: cannot listen ({exc.strerror or exc})"
-            ) from None
+        check_port(*self.config.address(), f"opcua.endpoint: {self.config.endpoint}")
         self.worker.start()
         if not self._ready.wait(timeout_s) or self._error is not None:
             self.worker.stop()

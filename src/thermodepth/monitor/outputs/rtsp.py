@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import socket
 import threading
 import time
 from fractions import Fraction
@@ -35,7 +34,7 @@ from ...errors import InputError
 from ..config import RtspConfig, read_token
 from ..logs import logger
 from ..workers import Worker
-from .base import Output, OutputContext, RigEntities
+from .base import Output, OutputContext, RigEntities, check_port
 
 INSTALL = (
     "rtsp: the monitor's RTSP server needs PyGObject and GStreamer's RTSP server: Debian's "
@@ -197,14 +196,7 @@ class RtspOutput(Output):
         return [r.name for r in rigs] == [r.name for r in self.rigs]
 
     def start(self, timeout_s: float = 30.0) -> None:
-        try:
-            with socket.socket() as s:  # a port that is taken is one line, not a traceback
-                s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-                s.bind((self.host, self.port))
-        except OSError as exc:
-            raise InputError(
-                f"rtsp.listen: {self.config.listen}: cannot listen ({exc.strerror or exc})"
-            ) from None
+        check_port(self.host, self.port, f"rtsp.listen: {self.config.listen}")
         self.worker.start()
         if not self._ready.wait(timeout_s) or self._error is not None:
             self.worker.stop()
