@@ -216,6 +216,8 @@ class CentralDashboard:
                 gone = [name] if name in self.rigs else []
             for rig in gone:
                 del self.rigs[rig]
+                for view, _ in SNAPSHOTS.values():  # its decoded pictures go with it
+                    self._videos.pop((rig, view), None)
         for rig in gone:
             self.log.info("%s: retired", rig)
 
