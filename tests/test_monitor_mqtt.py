@@ -248,8 +248,10 @@ def test_home_assistant_discovery(
 
         def latched(out: list[tuple[str, Any, bool]]) -> bool:  # every state, b's alarm raised
             last = {t: m for t, m, _ in out}
-            return last.keys() >= STATE_TOPICS and (
-                render(heat["value_template"], last["plant/b/alarm_states"]) == "ON"
+            return (
+                last.keys() >= STATE_TOPICS
+                and render(heat["value_template"], last["plant/b/alarm_states"]) == "ON"
+                and any(t == "plant/a/measurements" and m.get("hottest") for t, m, _ in out)
             )
 
         seen = states.until(latched)
@@ -273,10 +275,14 @@ def test_home_assistant_discovery(
     assert health["device_class"] == "problem"
     # the states follow the rigs, read through the configs' own templates
     last = {t: m for t, m, _ in seen}
-    measured = last["plant/a/measurements"]
+    # the last frame with a hotspot (a shutter frame's has none: Home Assistant's unknown)
+    measured = next(
+        m for t, m, _ in reversed(seen) if t == "plant/a/measurements" and m.get("hottest")
+    )
     assert float(render(hottest["value_template"], measured)) == pytest.approx(
         measured["hottest"]["max_c"]
     )
+    assert render(hottest["value_template"], {**measured, "hottest": None}) == "None"
     plate = configs[f"homeassistant/sensor/{node}/a_roi_plate/config"]
     assert float(render(plate["value_template"], measured)) == pytest.approx(
         measured["rois"]["plate"]["max_c"]
