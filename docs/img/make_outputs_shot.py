@@ -94,6 +94,11 @@ def main() -> None:
                 driver.get(f"{monitor.http.url}/health")
                 wait_for(lambda: driver.find_elements("css selector", "#outputs"), 30)
                 time.sleep(3)
+                # from the workers down: each output's worker and its state
+                driver.execute_script(
+                    "document.querySelector('#workers').previousElementSibling.scrollIntoView()"
+                )
+                time.sleep(1)
                 driver.save_screenshot(str(OUT / "dashboard-outputs.png"))
                 print(f"wrote {OUT / 'dashboard-outputs.png'}")
             finally:

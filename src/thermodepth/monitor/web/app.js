@@ -341,6 +341,9 @@ async function healthPage() {
   const draw = async () => {
     const s = await json("/api/status");
     const row = (k, v) => `<tr><th>${esc(k)}</th><td>${esc(v)}</td></tr>`;
+    // an output's status in words: nested figures (an RTSP server's streams) inline, none as –
+    const said = (o) => Object.entries(o).map(([k, v]) => `${k.replace(/_/g, " ")} ${
+      v === null ? "–" : typeof v === "object" ? (Object.keys(v).length ? `(${said(v)})` : "none") : v}`).join(", ");
     const rigs = s.rigs.map((r) => `<section class="card" data-rig="${esc(r.name)}"><div class="head"><h2>${esc(r.name)}</h2>${badge(r.health)}
       <span class="where">${esc(r.source)}</span></div><div class="body scroll"><table>
       ${row("state", r.state)}${row("frames/s", num(r.fps, 2))}${row("last frame", `${num(r.last_frame_age_s, 2)} s ago`)}
@@ -363,7 +366,7 @@ async function healthPage() {
         <td>${esc(w.state)}${w.down_s ? esc(`, down ${num(w.down_s, 1)} s`) : ""}</td><td>${w.restarts}</td>
         <td>${esc(w.last_error || "–")}</td></tr>`).join("")}</table>
       <h3>Outputs</h3>${Object.keys(s.outputs || {}).length ? `<table id="outputs">${Object.entries(s.outputs).map(([name, o]) =>
-        row(name, Object.entries(o).map(([k, v]) => `${k.replace(/_/g, " ")} ${v}`).join(", "))).join("")}</table>`
+        row(name, said(o))).join("")}</table>`
         : "<p>none (the dashboard and the log only)</p>"}`;
   };
   await draw();
