@@ -13,7 +13,7 @@ import os
 import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Protocol
 from urllib.parse import urlsplit
 
 from pydantic import Field, ValidationError, field_validator
@@ -121,6 +121,27 @@ def loopback_host(host: str) -> bool:
         return False
 
 
+class ListenSection(Protocol):
+    """A server's section that may listen beyond this machine only when told."""
+
+    listen: str
+    allow_remote: bool
+
+    def address(self) -> tuple[str, int]: ...
+
+
+def listen_problems(name: str, section: ListenSection, risk: str) -> list[str]:
+    """What is wrong with section ``name``'s ``listen``: not ``HOST:PORT``, or reachable from
+    other machines without ``allow_remote`` (``risk``: why that matters, and what to do)."""
+    try:
+        host = section.address()[0]
+    except ValueError as exc:
+        return [f"{name}.{exc}"]
+    if loopback_host(host) or section.allow_remote:
+        return []
+    return [f"{name}.listen: {section.listen} is reachable from other machines {risk}"]
+
+
 class MqttConfig(MqttSettings):
     """The broker: ``url`` (``mqtt://[USER@]HOST[:PORT]/PREFIX``, as ``run --mqtt`` takes
     it; each rig publishes under ``PREFIX/RIG/``), the settings' ``mqtt`` keys,
@@ -223,18 +244,10 @@ def _rtsp_problems(rtsp: RtspConfig | None) -> list[str]:
     """What is wrong with the RTSP section: its address, who could reach it, its password."""
     if rtsp is None:
         return []
-    problems = []
-    try:
-        host = rtsp.address()[0]
-    except ValueError as exc:
-        problems.append(f"rtsp.{exc}")
-    else:
-        if not loopback_host(host) and not rtsp.allow_remote:
-            problems.append(
-                f"rtsp.listen: {rtsp.listen} is reachable from other machines (RTSP sends its "
-                "password and pictures unencrypted): set rtsp.allow_remote: true, or listen on "
-                "127.0.0.1"
-            )
+    problems = listen_problems(
+        "rtsp", rtsp, "(RTSP sends its password and pictures unencrypted): set "
+        "rtsp.allow_remote: true, or listen on 127.0.0.1"
+    )  # fmt: skip
     try:
         read_token(rtsp.password_file, "password")
     except InputError as exc:
@@ -502,18 +515,10 @@ def _modbus_problems(config: MonitorConfig) -> list[str]:
     modbus = config.modbus
     if modbus is None:
         return []
-    problems = []
-    try:
-        host = modbus.address()[0]
-    except ValueError as exc:
-        problems.append(f"modbus.{exc}")
-    else:
-        if not loopback_host(host) and not modbus.allow_remote:
-            problems.append(
-                f"modbus.listen: {modbus.listen} is reachable from other machines and Modbus "
-                "has no authentication: set modbus.allow_remote: true (on a control network "
-                "only), or listen on 127.0.0.1"
-            )
+    problems = listen_problems(
+        "modbus", modbus, "and Modbus has no authentication: set modbus.allow_remote: true "
+        "(on a control network only), or listen on 127.0.0.1"
+    )  # fmt: skip
     from .outputs.modbus import room_problems  # the register map's room is its module's
 
     return problems + room_problems(config)
